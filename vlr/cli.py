@@ -1,0 +1,77 @@
+"""The `vlr` command line.
+
+Subcommands come from two places: those of the core (`vlr/`), and those that backends and
+tasks contribute through the `vlr.commands` entry-point group (see pyproject.toml). That keeps
+the dependency direction one way: `vlr` never imports `sim` or `hardware`; they plug in.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from importlib.metadata import entry_points
+
+# Headless rendering is the project's choice, not the user's (EGL on Mesa on CPU).
+os.environ.setdefault("MUJOCO_GL", "egl")
+os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+
+COMMAND_GROUP = "vlr.commands"
+BACKEND_GROUP = "vlr.backends"
+
+
+class UserError(Exception):
+    """An error the user can fix; printed as one line, without a traceback."""
+
+
+def open_backend(name: str, **options):
+    """Open a `Hand` from the backend registered under `name` (entry-point group vlr.backends).
+
+    The synthetic world lives in `vlr` itself; `sim` and `hardware` plug in.
+    """
+    found = {ep.name: ep for ep in entry_points(group=BACKEND_GROUP)}
+    if name not in found:
+        raise UserError(f"unknown backend {name!r}; available: {', '.join(sorted(found))}")
+    return found[name].load()(**options)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="vlr", description="Self-identification of hand-object systems with VLRs.")
+    sub = parser.add_subparsers(dest="command", metavar="COMMAND")
+    eps = sorted(entry_points(group=COMMAND_GROUP), key=lambda ep: ep.name)
+    for ep in eps:
+        try:
+            register = ep.load()
+        except ImportError as exc:  # an optional plug-in whose dependencies are absent
+            p = sub.add_parser(ep.name, help=f"(unavailable: {exc})")
+            p.set_defaults(func=lambda args, exc=exc: _unavailable(exc))
+            continue
+        register(sub)
+    return parser
+
+
+def _unavailable(exc: Exception) -> int:
+    raise UserError(f"this command is unavailable: {exc}")
+
+
+def main(argv: list[str] | None = None) -> int:
+    from vlr.spec import SpecError
+
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    if not getattr(args, "func", None):
+        parser.print_help()
+        return 2
+    try:
+        return int(args.func(args) or 0)
+    except (UserError, SpecError, FileNotFoundError) as exc:
+        print(f"vlr {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"vlr {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
