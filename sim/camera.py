@@ -1,0 +1,67 @@
+"""The simulated palm camera: offscreen rendering under EGL, optional degradations.
+
+The calibration comes from the MJCF camera through `vlr.camera.calibration_from_mujoco_camera`,
+the one place where MuJoCo's camera frame becomes OpenCV's.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+import mujoco
+import numpy as np
+
+from vlr.camera import CameraCalibration, calibration_from_mujoco_camera
+
+if TYPE_CHECKING:
+    from sim.backend import SimHand
+
+CAMERA_NAME = "palm_camera"
+
+
+def calibration_of(model: mujoco.MjModel, data: mujoco.MjData,
+                   width: int | None = None, height: int | None = None) -> CameraCalibration:
+    """The ideal calibration of the palm camera, extrinsics in the palm frame."""
+    mujoco.mj_kinematics(model, data)
+    mujoco.mj_camlight(model, data)
+    cam = model.camera(CAMERA_NAME).id
+    palm = model.body("palm").id
+    R_wp = data.xmat[palm].reshape(3, 3)
+    p_wp = data.xpos[palm]
+    pos = R_wp.T @ (data.cam_xpos[cam] - p_wp)
+    xmat = R_wp.T @ data.cam_xmat[cam].reshape(3, 3)
+    w = width or model.vis.global_.offwidth
+    h = height or model.vis.global_.offheight
+    return calibration_from_mujoco_camera(float(model.cam_fovy[cam]), int(w), int(h), pos, xmat)
+
+
+def render_palm_camera(hand: SimHand) -> np.ndarray | None:
+    """An RGB frame of the palm camera after the hand's camera effects (None = dropped)."""
+    opts = hand.options
+    if hand._renderer is None:
+        hand._renderer = mujoco.Renderer(hand.model, height=opts.height, width=opts.width)
+        hand._scene_option = mujoco.MjvOption()
+        # Only visual geoms (group 2) and the tag; collision duplicates (group 3) hidden.
+        hand._scene_option.geomgroup[:] = [1, 1, 1, 0, 0, 0]
+    r = hand._renderer
+    r.update_scene(hand.data, camera=CAMERA_NAME, scene_option=hand._scene_option)
+    image = r.render()
+    if opts.effects is None:
+        return image
+    from sim.camera_effects import apply_effects
+
+    return apply_effects(image, opts.effects, hand.rng, hand.calibration)
+
+
+def render_scene(hand: SimHand, width: int = 640, height: int = 480,
+                 camera: str = "scene_camera") -> np.ndarray:
+    """A third-person view of the hand and object (for pictures and render_mode)."""
+    key = (width, height)
+    cache = hand.__dict__.setdefault("_scene_renderers", {})
+    if key not in cache:
+        cache[key] = mujoco.Renderer(hand.model, height=height, width=width)
+    r = cache[key]
+    opt = mujoco.MjvOption()
+    opt.geomgroup[:] = [1, 1, 1, 0, 0, 0]
+    r.update_scene(hand.data, camera=camera, scene_option=opt)
+    return r.render()
