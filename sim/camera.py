@@ -43,6 +43,7 @@ def render_palm_camera(hand: SimHand) -> np.ndarray | None:
         hand._scene_option = mujoco.MjvOption()
         # Only visual geoms (group 2) and the tag; collision duplicates (group 3) hidden.
         hand._scene_option.geomgroup[:] = [1, 1, 1, 0, 0, 0]
+        hand._scene_option.sitegroup[:] = 0  # the POM site would mark the tag's centre
     r = hand._renderer
     r.update_scene(hand.data, camera=CAMERA_NAME, scene_option=hand._scene_option)
     image = r.render()
@@ -63,5 +64,6 @@ def render_scene(hand: SimHand, width: int = 640, height: int = 480,
     r = cache[key]
     opt = mujoco.MjvOption()
     opt.geomgroup[:] = [1, 1, 1, 0, 0, 0]
+    opt.sitegroup[:] = 0
     r.update_scene(hand.data, camera=camera, scene_option=opt)
     return r.render()

@@ -98,8 +98,9 @@ def build_finger(spec: FingerSpec, slot: str) -> mjcf.RootElement:
                 [w / 2, half_t, link_top / 2])
     dist.add("geom", name="pad", type="sphere", size=[spec.pad_radius], pos=list(pc),
              rgba=PAD_COLOR, group=3, mass=0, **_pad_geom_kwargs())
-    dist.add("geom", name="pad_visual", type="sphere", size=[spec.pad_radius], pos=list(pc),
-             rgba=PAD_COLOR, contype=0, conaffinity=0, group=2, mass=0)
+    if not spec.visual_meshes[1]:  # a distal mesh draws its own pad
+        dist.add("geom", name="pad_visual", type="sphere", size=[spec.pad_radius],
+                 pos=list(pc), rgba=PAD_COLOR, contype=0, conaffinity=0, group=2, mass=0)
     dist.add("site", name="pad_center", pos=list(pc), size=[0.001])
     prox.add("site", name="distal_joint", pos=[0, 0, lp], size=[0.001])
 
