@@ -1,0 +1,384 @@
+"""A small motor bus over `dynamixel_sdk` (Protocol 2.0, X series), after lerobot's MotorsBus.
+
+Every transaction is retried a bounded number of times on a communication failure; then it
+raises an error that names the motor. Every status packet's error byte is checked: the alert
+bit (0x80) means a hardware error, which is read from register 70 and decoded.
+
+Sharp edges of the SDK this class works around (docs: shared/docs/DYNAMIXEL.md):
+
+* No REG_WRITE/ACTION: a unicast ACTION leaves its reply to be taken as the next answer.
+* A sync read shares one timeout across all motors, and the SDK's GroupSyncRead drops the
+  error bytes. So `sync_read` sends SYNC_READ itself and reads each reply with `readRx`
+  (keeping its error byte); when the group fails it falls back to per-motor reads, which name
+  the silent motor.
+* Sync writes get no reply: the state is not guaranteed changed when they return; callers
+  that need it read it back.
+* The SDK never byte-stuffs what it sends, so a payload holding FF FF FD would be mangled by
+  the motor: such writes are refused here.
+* A KeyboardInterrupt inside a transaction leaves the SDK's `is_using` flag set, after which
+  every transaction fails as "port busy": `recover()` clears it.
+"""
+
+from __future__ import annotations
+
+import errno
+import fcntl
+import glob
+import os
+import time
+from collections.abc import Iterable, Mapping, Sequence
+
+import serial
+from dynamixel_sdk import (
+    COMM_RX_CORRUPT,
+    COMM_RX_TIMEOUT,
+    COMM_SUCCESS,
+    GroupSyncWrite,
+    PacketHandler,
+    PortHandler,
+)
+
+from hardware.control_table import (
+    ALERT_BIT,
+    MODEL_NUMBERS,
+    Reg,
+    describe_hardware_error,
+    describe_status_error,
+)
+from hardware.protocol2 import BROADCAST_ID, Instruction
+from vlr.cli import UserError
+
+#: Baud rates the SDK accepts (it refuses others before touching the port).
+SDK_BAUD_RATES = (9_600, 19_200, 38_400, 57_600, 115_200, 230_400, 460_800, 500_000, 576_000,
+                  921_600, 1_000_000, 1_152_000, 2_000_000, 2_500_000, 3_000_000, 3_500_000,
+                  4_000_000)
+
+class HardwareError(UserError):
+    """A hardware problem the user can fix (port, cable, power, motor id, motor fault)."""
+
+
+class PortError(HardwareError):
+    """The serial port does not exist, is busy, or cannot be opened."""
+
+
+class CommError(HardwareError):
+    """A motor did not answer, or its replies stayed corrupted, after bounded retries."""
+
+    def __init__(self, message: str, ids: Sequence[int] = ()) -> None:
+        super().__init__(message)
+        self.ids = tuple(ids)
+
+
+class MotorFaultError(HardwareError):
+    """A motor reports a hardware error (register 70): it has switched its torque off."""
+
+    def __init__(self, message: str, dxl_id: int, bits: int) -> None:
+        super().__init__(message)
+        self.dxl_id = dxl_id
+        self.bits = bits
+
+
+class MotorStatusError(HardwareError):
+    """A motor refused an instruction (status error number, e.g. access error 7)."""
+
+
+class _PortHandler(PortHandler):
+    """The SDK's port handler with a configurable latency budget in its packet timeout.
+
+    The SDK budgets 2 x 16 ms for the USB adapter's latency timer (FTDI default 16 ms); with
+    the U2D2's latency timer set to 1 ms, or on a pseudo-terminal, a smaller budget makes a
+    silent motor cost milliseconds instead of 34 ms per try.
+    """
+
+    def __init__(self, port_name: str, latency_ms: float) -> None:
+        super().__init__(port_name)
+        self.latency_ms = latency_ms
+
+    def setPacketTimeout(self, packet_length: int) -> None:  # noqa: N802 (SDK name)
+        self.packet_start_time = self.getCurrentTime()
+        self.packet_timeout = (self.tx_time_per_byte * packet_length + 2.0 * self.latency_ms
+                               + 2.0)
+
+
+def serial_ports() -> list[str]:
+    """Serial ports that look like a U2D2 or another USB adapter."""
+    found = []
+    for pattern in ("/dev/serial/by-id/*", "/dev/ttyUSB*", "/dev/ttyACM*"):
+        found.extend(sorted(glob.glob(pattern)))
+    return found
+
+
+class MotorBus:
+    """The motors on one serial port (Protocol 2.0).
+
+    Args:
+        port: serial device, e.g. /dev/ttyUSB0.
+        baud: bits per second; must match the motors' Baud Rate (8).
+        labels: names for messages, e.g. {1: "thumb"}.
+        latency_ms: USB latency budget in each packet timeout [ms] (see `_PortHandler`).
+        retries: extra tries of a failed transaction before raising `CommError`.
+    """
+
+    def __init__(self, port: str, baud: int, *, labels: Mapping[int, str] | None = None,
+                 latency_ms: float = 16.0, retries: int = 2) -> None:
+        self.port_name = port
+        self.baud = baud
+        self.labels = dict(labels or {})
+        self.latency_ms = latency_ms
+        self.retries = retries
+        self.packet = PacketHandler(2.0)
+        self.port: _PortHandler | None = None
+
+    # ----------------------------------------------------------------- connection
+    def connect(self) -> None:
+        """Open and lock the port; raise `PortError` naming the port on failure."""
+        if self.baud not in SDK_BAUD_RATES:
+            raise PortError(f"baud rate {self.baud} is not one the DYNAMIXEL SDK supports; "
+                            f"use one of {', '.join(map(str, SDK_BAUD_RATES))}")
+        if not os.path.exists(self.port_name):
+            present = serial_ports()
+            hint = (f"serial ports present: {', '.join(present)}" if present else
+                    "no USB serial adapter is present (is the U2D2 plugged in?)")
+            raise PortError(f"serial port {self.port_name} does not exist; {hint}")
+        port = _PortHandler(self.port_name, self.latency_ms)
+        port.baudrate = self.baud
+        try:
+            port.openPort()
+        except (serial.SerialException, OSError) as exc:
+            raise PortError(self._open_failure(exc)) from None
+        try:
+            # Exclusive advisory lock: a second program using this bus would garble packets.
+            fcntl.flock(port.ser.fileno(), fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError:
+            port.closePort()
+            raise PortError(f"serial port {self.port_name} is busy: another program holds it "
+                            "(close other vlr runs, the DYNAMIXEL Wizard, or screen)") from None
+        self.port = port
+
+    def _open_failure(self, exc: Exception) -> str:
+        code = getattr(exc, "errno", None)
+        if code in (errno.EACCES, errno.EPERM):
+            return (f"no permission to open serial port {self.port_name}; add yourself to the "
+                    "dialout group (sudo usermod -aG dialout $USER) and log in again")
+        if code == errno.EBUSY:
+            return f"serial port {self.port_name} is busy: another program holds it"
+        return f"cannot open serial port {self.port_name}: {exc}"
+
+    def close(self) -> None:
+        """Close the port (releases the lock). Safe to call twice."""
+        if self.port is not None:
+            self.port.is_using = False
+            try:
+                self.port.closePort()
+            finally:
+                self.port = None
+
+    @property
+    def connected(self) -> bool:
+        return self.port is not None
+
+    def recover(self) -> None:
+        """Make the port usable after a failed or interrupted transaction: clear the SDK's
+        busy flag and drop late replies (waiting a little so they have arrived)."""
+        port = self._port()
+        port.is_using = False
+        time.sleep(0.002 + 20 * port.tx_time_per_byte / 1000.0)
+        try:
+            port.clearPort()
+        except (serial.SerialException, OSError):
+            pass
+
+    def _port(self) -> _PortHandler:
+        if self.port is None:
+            raise HardwareError(f"the motor bus on {self.port_name} is not connected")
+        return self.port
+
+    def label(self, dxl_id: int) -> str:
+        name = self.labels.get(dxl_id)
+        return f"motor {dxl_id} ({name})" if name else f"motor {dxl_id}"
+
+    # ----------------------------------------------------------------- error handling
+    def _retry(self, what: str, dxl_id: int, attempt):
+        """Run `attempt() -> (result, value)` until COMM_SUCCESS, at most 1 + retries times."""
+        result = COMM_SUCCESS
+        for _ in range(self.retries + 1):
+            result, value = attempt()
+            if result == COMM_SUCCESS:
+                return value
+            self.recover()
+        raise CommError(self._comm_message(what, [dxl_id], result), [dxl_id])
+
+    def _comm_message(self, what: str, ids: Sequence[int], result: int) -> str:
+        who = ", ".join(self.label(i) for i in ids)
+        tries = self.retries + 1
+        where = f"on {self.port_name} at {self.baud} baud"
+        if result == COMM_RX_TIMEOUT:
+            return (f"{who} does not answer ({what}) {where} after {tries} tries: check its "
+                    "id, baud rate, power (12 V) and the daisy-chain cable")
+        if result == COMM_RX_CORRUPT:
+            return (f"replies from {who} are corrupted (bad CRC or truncated; {what}) "
+                    f"{where} after {tries} tries: check the cable and the baud rate")
+        return (f"communication with {who} failed ({what}) {where}: "
+                f"{self.packet.getTxRxResult(result)}")
+
+    def check_status(self, dxl_id: int, error: int, what: str) -> None:
+        """Raise if a status packet's error byte reports a problem (alert bit: decode 70)."""
+        if error & ALERT_BIT:
+            bits = self.hardware_error(dxl_id)
+            raise MotorFaultError(
+                f"{self.label(dxl_id)} is in a hardware error state and has switched its "
+                f"torque off: {describe_hardware_error(bits)} (register 70 = 0x{bits:02X}). "
+                "Remove the cause (load, heat, supply), then reboot the motor or power-cycle.",
+                dxl_id, bits)
+        if error & 0x7F:
+            raise MotorStatusError(f"{self.label(dxl_id)} refused {what}: "
+                                   f"{describe_status_error(error)}")
+
+    # ----------------------------------------------------------------- transactions
+    def ping(self, dxl_id: int) -> int:
+        """The model number of `dxl_id`; `CommError` naming the id if it does not answer."""
+        def attempt():
+            model, result, error = self.packet.ping(self._port(), dxl_id)
+            return result, (model, error)
+        model, error = self._retry("ping", dxl_id, attempt)
+        self.check_status(dxl_id, error, "ping")
+        return model
+
+    def model_name(self, model: int) -> str:
+        return MODEL_NUMBERS.get(model, f"model {model}")
+
+    def read_raw(self, address: int, length: int, dxl_id: int) -> tuple[bytes, int]:
+        """(data, status error byte) of a READ, with retries; the error byte is NOT checked."""
+        def attempt():
+            data, result, error = self.packet.readTxRx(self._port(), dxl_id, address, length)
+            if result == COMM_SUCCESS and len(data) != length:
+                result = COMM_RX_CORRUPT
+            return result, (bytes(data), error)
+        return self._retry(f"read {length} bytes at {address}", dxl_id, attempt)
+
+    def read(self, reg: Reg, dxl_id: int) -> int:
+        """Read one register of one motor."""
+        data, error = self.read_raw(reg.address, reg.size, dxl_id)
+        self.check_status(dxl_id, error, f"read of {reg.name.lower()}")
+        return reg.decode(data)
+
+    def hardware_error(self, dxl_id: int) -> int:
+        """Hardware Error Status (70) of a motor; never raises for the alert bit itself."""
+        reg = Reg.HARDWARE_ERROR_STATUS
+        data, _ = self.read_raw(reg.address, reg.size, dxl_id)
+        return reg.decode(data)
+
+    def write(self, reg: Reg, dxl_id: int, value: int, *, check_alert: bool = True) -> None:
+        """Write one register of one motor and wait for its status."""
+        data = _payload(reg, value, Instruction.WRITE)
+
+        def attempt():
+            result, error = self.packet.writeTxRx(self._port(), dxl_id, reg.address, reg.size,
+                                                  list(data))
+            return result, error
+        error = self._retry(f"write of {reg.name.lower()}={value}", dxl_id, attempt)
+        if not check_alert:
+            error &= ~ALERT_BIT
+        self.check_status(dxl_id, error, f"write of {reg.name.lower()}={value}")
+
+    def sync_write(self, reg: Reg, values: Mapping[int, int]) -> None:
+        """One SYNC_WRITE of `reg` to several motors. No reply: read back if it matters."""
+        group = GroupSyncWrite(self._port(), self.packet, reg.address, reg.size)
+        for dxl_id, value in values.items():
+            group.addParam(dxl_id, list(_payload(reg, value, dxl_id)))
+
+        def attempt():
+            return group.txPacket(), None
+        self._retry(f"sync write of {reg.name.lower()}", next(iter(values)), attempt)
+
+    def sync_read(self, regs: Sequence[Reg], ids: Sequence[int]) -> dict[int, dict[Reg, int]]:
+        """Read the span covering `regs` from every motor in `ids` with one SYNC_READ.
+
+        If the group fails after retries, per-motor reads find the motor at fault, so the
+        error names it (a group timeout alone cannot tell which motor is silent).
+        """
+        start = min(r.address for r in regs)
+        length = max(r.address + r.size for r in regs) - start
+        replies: dict[int, tuple[bytes, int]] | None = None
+        for _ in range(self.retries + 1):
+            replies = self._sync_read_once(start, length, ids)
+            if replies is not None:
+                break
+            self.recover()
+        if replies is None:
+            replies = {i: self.read_raw(start, length, i) for i in ids}
+        out = {}
+        for dxl_id, (data, error) in replies.items():
+            self.check_status(dxl_id, error, "sync read")
+            out[dxl_id] = {r: r.decode(data[r.address - start:]) for r in regs}
+        return out
+
+    def _sync_read_once(self, start: int, length: int,
+                        ids: Sequence[int]) -> dict[int, tuple[bytes, int]] | None:
+        port = self._port()
+        result = self.packet.syncReadTx(port, start, length, list(ids), len(ids), False)
+        if result != COMM_SUCCESS:
+            return None
+        replies = {}
+        for dxl_id in ids:
+            data, result, error = self.packet.readRx(port, dxl_id, length)
+            if result != COMM_SUCCESS or len(data) != length:
+                port.is_using = False
+                return None
+            replies[dxl_id] = (bytes(data), error)
+        return replies
+
+    def sync_read_one(self, reg: Reg, ids: Sequence[int]) -> dict[int, int]:
+        """One register from several motors."""
+        return {i: v[reg] for i, v in self.sync_read([reg], ids).items()}
+
+    # ----------------------------------------------------------------- conveniences
+    def set_torque(self, ids: Iterable[int], on: bool) -> None:
+        """Switch torque on or off, motor by motor (each write is acknowledged)."""
+        for dxl_id in ids:
+            self.write(Reg.TORQUE_ENABLE, dxl_id, int(on))
+
+    def torque_off_everywhere(self, ids: Iterable[int]) -> list[str]:
+        """Best effort, for shutdown: a broadcast torque-off (reaches a motor whose replies
+        are lost), then each motor acknowledged. Returns problems instead of raising."""
+        problems = []
+        port = self.port
+        if port is None:
+            return [f"bus on {self.port_name} is not connected"]
+        port.is_using = False
+        try:
+            self.packet.write1ByteTxOnly(port, BROADCAST_ID, Reg.TORQUE_ENABLE.address, 0)
+        except (serial.SerialException, OSError) as exc:
+            problems.append(f"broadcast torque off failed: {exc}")
+        for dxl_id in ids:
+            try:
+                self.write(Reg.TORQUE_ENABLE, dxl_id, 0, check_alert=False)
+            except HardwareError as exc:
+                problems.append(str(exc))
+            except (serial.SerialException, OSError) as exc:
+                problems.append(f"{self.label(dxl_id)}: torque off failed: {exc}")
+        return problems
+
+    def reboot(self, dxl_id: int) -> None:
+        """REBOOT a motor (clears a hardware error; torque comes back off)."""
+        def attempt():
+            result, error = self.packet.reboot(self._port(), dxl_id)
+            return result, error
+        self._retry("reboot", dxl_id, attempt)
+
+
+def _payload(reg: Reg, value: int, lead: int) -> bytes:
+    """The register bytes of `value`, refused if they would need byte stuffing on the wire.
+
+    `lead` is the byte sent just before them (the instruction or the motor id), so that an
+    FF FF FD spanning both is caught too.
+    """
+    try:
+        data = reg.encode(value)
+    except OverflowError:
+        raise ValueError(f"{reg.name.lower()} = {value} does not fit in {reg.size} bytes") \
+            from None
+    if b"\xff\xff\xfd" in bytes([lead]) + data:
+        raise ValueError(f"{reg.name.lower()} = {value} encodes to FF FF FD, which the SDK "
+                         "does not byte-stuff; the motor would misread it")
+    return data

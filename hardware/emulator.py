@@ -1,0 +1,493 @@
+"""An emulated chain of DYNAMIXEL X-series motors (Protocol 2.0) on a pseudo-terminal.
+
+The real `dynamixel_sdk` talks to it byte for byte: give the SDK `Emulator.port` (the pty's
+slave path) as its serial port. A background thread serves the master side: it parses
+instruction packets (header, stuffing, CRC-16), answers with status packets and advances the
+motors' motion through a `MotorPlant`.
+
+What is emulated (XM430-W350, https://emanual.robotis.com/docs/en/dxl/x/xm430-w350/):
+PING (also broadcast), READ, WRITE, SYNC_READ, SYNC_WRITE, BULK_READ, REBOOT; a control table
+per motor (`hardware.control_table.Reg`); EEPROM (addresses < 64) not writable with torque on
+(access error 7); present position moving towards the goal at a bounded rate, so a master
+really has to wait; a load model (`KinematicPlant`); and faults to inject: a motor that stops
+answering, corrupted replies (bad CRC), and hardware errors (e.g. overload, bit 5 of register
+70), which switch torque off and set the alert bit 0x80 in every status until REBOOT.
+
+Multi-turn position is lost on REBOOT, as on the real motor: present position then reads
+within one turn (0..4095). Plants see the continuous `shaft` angle, which a reboot does not
+change.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import select
+import threading
+import time
+import tty
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Protocol
+
+from hardware.control_table import (
+    ALERT_BIT,
+    CURRENT_UNIT_MA,
+    EEPROM_END,
+    EXTENDED_POSITION_LIMIT,
+    READ_ONLY,
+    TICKS_PER_REV,
+    VELOCITY_UNIT_RPM,
+    HardwareError,
+    OperatingMode,
+    Reg,
+)
+from hardware.protocol2 import (
+    BROADCAST_ID,
+    Instruction,
+    Packet,
+    PacketParser,
+    encode_status,
+)
+
+# Status error numbers (Protocol 2.0).
+ERR_INSTRUCTION = 2
+ERR_CRC = 3
+ERR_DATA_RANGE = 4
+ERR_DATA_LENGTH = 5
+ERR_DATA_LIMIT = 6
+ERR_ACCESS = 7
+
+#: Size of the emulated control table [bytes] (the XM430's indirect area is left out).
+TABLE_SIZE = 256
+
+#: Defaults of a factory-new XM430-W350 (e-manual, "Control Table"), id and baud aside.
+_FACTORY = {
+    Reg.MODEL_NUMBER: 1020, Reg.FIRMWARE_VERSION: 46, Reg.BAUD_RATE: 1,
+    Reg.RETURN_DELAY_TIME: 250, Reg.OPERATING_MODE: int(OperatingMode.POSITION),
+    Reg.MOVING_THRESHOLD: 10, Reg.TEMPERATURE_LIMIT: 80, Reg.CURRENT_LIMIT: 1193,
+    Reg.VELOCITY_LIMIT: 200, Reg.MAX_POSITION_LIMIT: 4095, Reg.MIN_POSITION_LIMIT: 0,
+    Reg.SHUTDOWN: 52, Reg.STATUS_RETURN_LEVEL: 2, Reg.POSITION_P_GAIN: 800,
+    Reg.PRESENT_INPUT_VOLTAGE: 120, Reg.PRESENT_TEMPERATURE: 31,
+}
+
+
+def rpm_to_ticks_per_s(rpm: float) -> float:
+    return rpm / 60.0 * TICKS_PER_REV
+
+
+@dataclass
+class Faults:
+    """Faults injected into one motor.
+
+    Attributes:
+        silent: the motor sends no status packets (a broken return line, a flaky
+            connector); it still executes what it hears, so a broadcast can still reach it.
+        corrupt_replies: the next N status packets carry a bad CRC; -1 means all of them.
+    """
+
+    silent: bool = False
+    corrupt_replies: int = 0
+
+
+class EmulatedMotor:
+    """One XM430: its control table bytes plus the continuous shaft angle."""
+
+    def __init__(self, dxl_id: int, shaft: float = 2048.0, model: int = 1020) -> None:
+        self.table = bytearray(TABLE_SIZE)
+        for reg, value in _FACTORY.items():
+            self.set(reg, value)
+        self.set(Reg.MODEL_NUMBER, model)
+        self.set(Reg.ID, dxl_id)
+        self.shaft = float(shaft)  # continuous angle [ticks]; what a plant moves
+        # present position = shaft - lost; a power-up or reboot forgets whole turns.
+        self.lost = self._whole_turns(shaft)
+        self.velocity = 0.0        # [ticks/s]
+        self.current = 0.0         # [mA], signed
+        self.moving = False
+        self.faults = Faults()
+        self.set(Reg.GOAL_POSITION, self.present_position)
+
+    # ----------------------------------------------------------------- register access
+    @property
+    def dxl_id(self) -> int:
+        return self.get(Reg.ID)
+
+    def get(self, reg: Reg) -> int:
+        return reg.decode(self.table[reg.address: reg.address + reg.size])
+
+    def set(self, reg: Reg, value: int) -> None:
+        self.table[reg.address: reg.address + reg.size] = reg.encode(value)
+
+    @staticmethod
+    def _whole_turns(ticks: float) -> int:
+        return int(math.floor(ticks / TICKS_PER_REV)) * TICKS_PER_REV
+
+    @property
+    def present_position(self) -> int:
+        return int(round(self.shaft - self.lost))
+
+    @property
+    def torque_on(self) -> bool:
+        return bool(self.get(Reg.TORQUE_ENABLE))
+
+    @property
+    def mode(self) -> int:
+        return self.get(Reg.OPERATING_MODE)
+
+    @property
+    def goal_shaft(self) -> float:
+        """The goal position in the shaft frame [ticks]."""
+        return float(self.get(Reg.GOAL_POSITION) + self.lost)
+
+    @property
+    def current_cap(self) -> float:
+        """The most current the motor may draw [mA]: Goal Current in current-based position
+        mode, else Current Limit."""
+        limit = self.get(Reg.CURRENT_LIMIT)
+        if self.mode == OperatingMode.CURRENT_BASED_POSITION:
+            limit = min(limit, abs(self.get(Reg.GOAL_CURRENT)))
+        return limit * CURRENT_UNIT_MA
+
+    @property
+    def max_speed(self) -> float:
+        """Speed of a move [ticks/s]: Profile Velocity if set, else Velocity Limit."""
+        v = self.get(Reg.PROFILE_VELOCITY) or self.get(Reg.VELOCITY_LIMIT)
+        return rpm_to_ticks_per_s(v * VELOCITY_UNIT_RPM)
+
+    def fault(self, bits: int) -> None:
+        """Raise a hardware error: set register 70 and switch torque off (Shutdown)."""
+        self.set(Reg.HARDWARE_ERROR_STATUS, self.get(Reg.HARDWARE_ERROR_STATUS) | bits)
+        self.set(Reg.TORQUE_ENABLE, 0)
+
+    def error_byte(self, number: int = 0) -> int:
+        return number | (ALERT_BIT if self.get(Reg.HARDWARE_ERROR_STATUS) else 0)
+
+    def sync_present(self) -> None:
+        """Copy the motion state into the present-value registers."""
+        self.set(Reg.PRESENT_POSITION, self.present_position)
+        self.set(Reg.PRESENT_VELOCITY, int(round(self.velocity / rpm_to_ticks_per_s(
+            VELOCITY_UNIT_RPM))))
+        self.set(Reg.PRESENT_CURRENT, int(round(self.current / CURRENT_UNIT_MA)))
+        self.set(Reg.MOVING, int(self.moving))
+
+    def read(self, address: int, length: int) -> tuple[int, bytes]:
+        """(error number, data) for a READ of `length` bytes at `address`."""
+        if length < 1 or address + length > TABLE_SIZE:
+            return ERR_ACCESS, b""
+        self.sync_present()
+        return 0, bytes(self.table[address: address + length])
+
+    def write(self, address: int, data: bytes) -> int:
+        """Apply a WRITE; returns the status error number (0 on success)."""
+        end = address + len(data)
+        if not data or end > TABLE_SIZE:
+            return ERR_DATA_LENGTH
+        touched = [r for r in Reg if r.address < end and address < r.address + r.size]
+        if any(r in READ_ONLY for r in touched):
+            return ERR_ACCESS
+        if address < EEPROM_END and self.torque_on:
+            return ERR_ACCESS
+        scratch = bytearray(self.table)
+        scratch[address:end] = data
+        new = {r: r.decode(scratch[r.address: r.address + r.size]) for r in touched}
+        if Reg.OPERATING_MODE in new and new[Reg.OPERATING_MODE] not in set(OperatingMode):
+            return ERR_DATA_RANGE
+        if Reg.TORQUE_ENABLE in new and new[Reg.TORQUE_ENABLE] not in (0, 1):
+            return ERR_DATA_RANGE
+        if Reg.GOAL_CURRENT in new and abs(new[Reg.GOAL_CURRENT]) > self.get(Reg.CURRENT_LIMIT):
+            return ERR_DATA_LIMIT
+        if Reg.GOAL_POSITION in new and not self._goal_ok(new[Reg.GOAL_POSITION]):
+            return ERR_DATA_LIMIT
+        torque_was = self.torque_on
+        if Reg.TORQUE_ENABLE in new and new[Reg.TORQUE_ENABLE] and self.get(
+                Reg.HARDWARE_ERROR_STATUS):
+            scratch[Reg.TORQUE_ENABLE.address] = 0  # a faulted motor keeps torque off
+        self.table[:] = scratch
+        if self.torque_on and not torque_was and Reg.GOAL_POSITION not in new:
+            # Enabling torque holds the shaft where it is rather than jumping to a stale goal.
+            self.set(Reg.GOAL_POSITION, self.present_position)
+        return 0
+
+    def _goal_ok(self, goal: int) -> bool:
+        if self.mode == OperatingMode.POSITION:
+            return self.get(Reg.MIN_POSITION_LIMIT) <= goal <= self.get(Reg.MAX_POSITION_LIMIT)
+        return abs(goal) <= EXTENDED_POSITION_LIMIT
+
+    def reboot(self) -> None:
+        """REBOOT: RAM back to defaults, hardware error cleared, whole turns forgotten."""
+        self.table[EEPROM_END:] = bytes(TABLE_SIZE - EEPROM_END)
+        for reg, value in _FACTORY.items():
+            if not reg.eeprom:
+                self.set(reg, value)
+        self.lost = self._whole_turns(self.shaft)
+        self.velocity, self.current, self.moving = 0.0, 0.0, False
+        self.set(Reg.GOAL_POSITION, self.present_position)
+
+
+class MotorPlant(Protocol):
+    """What moves the motors' shafts: goal positions in, positions and currents out.
+
+    `step` is called by the emulator's thread every few milliseconds, with the lock held, so
+    it must be quick (a slow simulation belongs in its own thread; see `hardware.sim_plant`).
+    It reads `goal_shaft`, `torque_on`, `current_cap`, `max_speed` of each motor and sets
+    `shaft`, `velocity`, `current` and `moving`.
+    """
+
+    def step(self, motors: Mapping[int, EmulatedMotor], dt: float) -> None: ...
+
+
+class KinematicPlant:
+    """A motor winding a tendon: moves at bounded speed; once the line is taut, it carries
+    the springs' preload plus a tension growing with further winding, and the motor stalls
+    where that load reaches its current cap.
+
+    Args:
+        taut: shaft angle [ticks] at which each motor's line goes taut; a motor absent from
+            the mapping drives no load.
+        directions: +1 if increasing ticks winds the line (default +1).
+        preload: load current as soon as the line is taut [mA] (the Model O's joint springs
+            are preloaded against their open stops, vlr/spec.py).
+        stiffness: further load current per tick wound past taut [mA/tick] (0.15 mA/tick:
+            ~400 mA after 35 mm on a 10 mm spool, a closed hand within the XM430's limits).
+        friction: current of an unloaded move [mA].
+    """
+
+    def __init__(self, taut: Mapping[int, float] | None = None,
+                 directions: Mapping[int, int] | None = None, preload: float = 60.0,
+                 stiffness: float = 0.15, friction: float = 8.0) -> None:
+        self.taut = dict(taut or {})
+        self.directions = dict(directions or {})
+        self.preload = preload
+        self.stiffness = stiffness
+        self.friction = friction
+
+    def load(self, dxl_id: int, shaft: float) -> float:
+        """Load current [mA] (>= 0) at `shaft`: 0 while slack, then preload + stiffness x
+        the winding past taut."""
+        if dxl_id not in self.taut:
+            return 0.0
+        past = self.directions.get(dxl_id, 1) * (shaft - self.taut[dxl_id])
+        return self.preload + self.stiffness * past if past > 0 else 0.0
+
+    def step(self, motors: Mapping[int, EmulatedMotor], dt: float) -> None:
+        for dxl_id, m in motors.items():
+            d = self.directions.get(dxl_id, 1)
+            if not m.torque_on:
+                # Unpowered, the springs unwind the line back to where it is just taut.
+                if dxl_id in self.taut and self.load(dxl_id, m.shaft) > 0:
+                    m.shaft = self.taut[dxl_id]
+                m.velocity, m.moving, m.current = 0.0, False, 0.0
+                continue
+            start = m.shaft
+            reach = m.max_speed * dt
+            target = start + max(-reach, min(reach, m.goal_shaft - start))
+            if dxl_id in self.taut and d * (target - start) > 0:
+                # Winding further stalls once the load reaches the current cap.
+                past = max(0.0, (m.current_cap - self.preload) / self.stiffness)
+                stall = self.taut[dxl_id] + d * past
+                if d * (target - stall) > 0:
+                    target = stall if d * (stall - start) > 0 else start
+            m.shaft = target
+            m.velocity = (target - start) / dt if dt > 0 else 0.0
+            m.moving = abs(target - start) > 1e-6
+            sign = (m.velocity > 0) - (m.velocity < 0)
+            m.current = d * self.load(dxl_id, target) + sign * (self.friction if m.moving else 0)
+
+
+class Emulator:
+    """Motors on a pseudo-terminal, served by a background thread.
+
+    Use as a context manager, or `start()` / `stop()`. `port` is the path to give the SDK.
+
+    Args:
+        ids: the motors' ids.
+        plant: what moves them (default: a `KinematicPlant` without load).
+        shafts: initial shaft angles [ticks] per id (default 2048: mid-turn).
+        tick: period of the motion update when the bus is idle [s].
+    """
+
+    def __init__(self, ids: Iterable[int], plant: MotorPlant | None = None,
+                 shafts: Mapping[int, float] | None = None, tick: float = 0.002) -> None:
+        shafts = shafts or {}
+        self.motors: dict[int, EmulatedMotor] = {
+            i: EmulatedMotor(i, shafts.get(i, 2048.0)) for i in ids}
+        self.plant: MotorPlant = plant if plant is not None else KinematicPlant()
+        self.tick = tick
+        self.lock = threading.RLock()
+        self.packets_served = 0
+        self._parser = PacketParser()
+        self._master = self._slave = -1
+        self._thread: threading.Thread | None = None
+        self._stop = threading.Event()
+        self._last = time.monotonic()
+        self.port = ""
+
+    # ----------------------------------------------------------------- lifecycle
+    def start(self) -> str:
+        """Open the pty and start serving; returns the port path for the SDK."""
+        self._master, self._slave = os.openpty()
+        # Raw from the start: no echo or line editing before the SDK configures the port.
+        tty.setraw(self._slave)
+        self.port = os.ttyname(self._slave)
+        self._last = time.monotonic()
+        self._stop.clear()
+        self._thread = threading.Thread(target=self._serve, name="dxl-emulator", daemon=True)
+        self._thread.start()
+        return self.port
+
+    def stop(self) -> None:
+        self._stop.set()
+        if self._thread is not None:
+            self._thread.join(timeout=2.0)
+            self._thread = None
+        for fd in (self._master, self._slave):
+            if fd >= 0:
+                os.close(fd)
+        self._master = self._slave = -1
+
+    def __enter__(self) -> Emulator:
+        self.start()
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.stop()
+
+    # ----------------------------------------------------------------- inspection and faults
+    def register(self, dxl_id: int, reg: Reg) -> int:
+        """The value of `reg` on motor `dxl_id`, as the motor holds it now."""
+        with self.lock:
+            m = self.motors[dxl_id]
+            m.sync_present()
+            return m.get(reg)
+
+    def torque(self) -> dict[int, bool]:
+        """Torque Enable of every motor."""
+        with self.lock:
+            return {i: m.torque_on for i, m in self.motors.items()}
+
+    def silence(self, dxl_id: int, silent: bool = True) -> None:
+        """Make a motor stop (or resume) answering."""
+        with self.lock:
+            self.motors[dxl_id].faults.silent = silent
+
+    def corrupt(self, dxl_id: int, count: int = 1) -> None:
+        """Give the next `count` replies of a motor a bad CRC (-1: all of them)."""
+        with self.lock:
+            self.motors[dxl_id].faults.corrupt_replies = count
+
+    def inject_hardware_error(self, dxl_id: int,
+                              bits: int = HardwareError.OVERLOAD) -> None:
+        """Raise a hardware error on a motor (default: overload, bit 5 of register 70)."""
+        with self.lock:
+            self.motors[dxl_id].fault(int(bits))
+
+    # ----------------------------------------------------------------- serving
+    def _serve(self) -> None:
+        while not self._stop.is_set():
+            try:
+                ready, _, _ = select.select([self._master], [], [], self.tick)
+            except (OSError, ValueError):
+                return
+            data = b""
+            if ready:
+                try:
+                    data = os.read(self._master, 4096)
+                except OSError:  # no slave open at the moment (EIO): keep waiting
+                    time.sleep(self.tick)
+            with self.lock:
+                self._advance()
+                for packet in self._parser.feed(data) if data else ():
+                    reply = self._handle(packet)
+                    self.packets_served += 1
+                    if reply:
+                        try:
+                            os.write(self._master, reply)
+                        except OSError:
+                            pass
+
+    def _advance(self) -> None:
+        now = time.monotonic()
+        dt, self._last = now - self._last, now
+        if dt > 0:
+            self.plant.step(self.motors, dt)
+
+    def _status(self, m: EmulatedMotor, number: int = 0, params: bytes = b"") -> bytes:
+        """One motor's status packet, or b"" if the motor is silent."""
+        if m.faults.silent:
+            return b""
+        packet = encode_status(m.dxl_id, m.error_byte(number), params)
+        if m.faults.corrupt_replies:
+            if m.faults.corrupt_replies > 0:
+                m.faults.corrupt_replies -= 1
+            packet = packet[:-1] + bytes([packet[-1] ^ 0xFF])
+        return packet
+
+    def _targets(self, dxl_id: int) -> list[EmulatedMotor]:
+        if dxl_id == BROADCAST_ID:
+            return [self.motors[i] for i in sorted(self.motors)]
+        m = self._by_id(dxl_id)
+        return [m] if m else []
+
+    def _by_id(self, dxl_id: int) -> EmulatedMotor | None:
+        for m in self.motors.values():
+            if m.dxl_id == dxl_id:  # the id register, which a WRITE to address 7 changes
+                return m
+        return None
+
+    def _handle(self, p: Packet) -> bytes:
+        targets = self._targets(p.dxl_id)
+        unicast = p.dxl_id != BROADCAST_ID
+        if not p.crc_ok:
+            return self._status(targets[0], ERR_CRC) if unicast and targets else b""
+        inst, params = p.instruction, p.params
+        if inst == Instruction.PING:
+            return b"".join(self._status(m, 0, m.get(Reg.MODEL_NUMBER).to_bytes(2, "little")
+                                         + bytes([m.get(Reg.FIRMWARE_VERSION)]))
+                            for m in targets)
+        if inst == Instruction.READ and unicast and targets:
+            if len(params) != 4:
+                return self._status(targets[0], ERR_DATA_LENGTH)
+            number, data = targets[0].read(_u16(params, 0), _u16(params, 2))
+            return self._status(targets[0], number, data)
+        if inst == Instruction.WRITE:
+            if len(params) < 3:
+                return self._status(targets[0], ERR_DATA_LENGTH) if unicast and targets else b""
+            numbers = [m.write(_u16(params, 0), params[2:]) for m in targets]
+            return self._status(targets[0], numbers[0]) if unicast and targets else b""
+        if inst == Instruction.REBOOT:
+            reply = self._status(targets[0]) if unicast and targets else b""
+            for m in targets:
+                m.reboot()
+            return reply
+        if inst == Instruction.SYNC_READ and not unicast:
+            address, length = _u16(params, 0), _u16(params, 2)
+            out = []
+            for dxl_id in params[4:]:
+                m = self._by_id(dxl_id)
+                if m is not None:
+                    number, data = m.read(address, length)
+                    out.append(self._status(m, number, data))
+            return b"".join(out)
+        if inst == Instruction.SYNC_WRITE and not unicast:
+            address, length = _u16(params, 0), _u16(params, 2)
+            body = params[4:]
+            for k in range(0, len(body) - length, length + 1):
+                m = self._by_id(body[k])
+                if m is not None:
+                    m.write(address, body[k + 1: k + 1 + length])  # no status: broadcast
+            return b""
+        if inst == Instruction.BULK_READ and not unicast:
+            out = []
+            for k in range(0, len(params) - 4, 5):
+                m = self._by_id(params[k])
+                if m is not None:
+                    number, data = m.read(_u16(params, k + 1), _u16(params, k + 3))
+                    out.append(self._status(m, number, data))
+            return b"".join(out)
+        # REG_WRITE/ACTION, FACTORY_RESET, fast sync read etc. are not emulated.
+        return self._status(targets[0], ERR_INSTRUCTION) if unicast and targets else b""
+
+
+def _u16(data: bytes, offset: int) -> int:
+    return data[offset] | (data[offset + 1] << 8)
