@@ -1,0 +1,367 @@
+"""The real Yale OpenHand Model O behind `vlr.hand.Hand` (`--backend hardware`).
+
+One DYNAMIXEL X-series motor per finger winds that finger's tendon on a spool; an optional
+spread motor is held at a fixed position (the paper keeps the spread fixed, METHOD.md 1).
+
+Safety, in order of defence:
+
+* Commands: `check_delta` (finite, one per finger, |delta| <= motion.max_step), then clipping
+  to motion.range; moves are ramped; the current is capped (Current Limit, and Goal Current
+  in current-based position mode).
+* Torque is on only while the hand runs. Any exception inside a move (a motor fault, a silent
+  motor, Ctrl-C) switches torque off before it propagates; `close()` switches it off again
+  (a broadcast first, so a motor whose replies are lost still hears it) and is called by the
+  context manager, by `atexit`, and on SIGTERM/SIGHUP (turned into SystemExit).
+"""
+
+from __future__ import annotations
+
+import atexit
+import contextlib
+import signal
+import sys
+import threading
+import time
+from collections.abc import Callable, Iterator
+from typing import Any
+
+import numpy as np
+
+from hardware.bus import HardwareError, MotorBus
+from hardware.calibration import find_zeros
+from hardware.camera import FakeCamera, FrameSource, OpenCVCamera
+from hardware.config import EMULATOR_PORT, HardwareConfig, load_config
+from hardware.control_table import (
+    CURRENT_UNIT_MA,
+    MODEL_NUMBERS,
+    VELOCITY_UNIT_RPM,
+    OperatingMode,
+    Reg,
+)
+from hardware.tendons import TendonMap, read_motion, resolve_zero, wait_until_stopped
+from vlr.camera import CameraCalibration
+from vlr.hand import ApplyReport, Frame, GraspError, check_delta
+from vlr.spec import HandSpec, ObjectSpec, load_hand, load_object
+
+
+def _log(message: str) -> None:
+    print(f"[hardware] {message}", file=sys.stderr)
+
+
+class HardwareHand:
+    """The Model O on a DYNAMIXEL bus, with a palm camera. Implements `vlr.hand.Hand`.
+
+    Construction connects, pings every motor, configures them, finds (or resolves) the tendon
+    zeros, holds the spread motor and opens the hand at u = 0. Files are read by `open_hand`;
+    this class takes values.
+
+    Args:
+        config: the loaded hardware config.
+        spec, object_spec, calibration: the nominal hand, the grasped object, the camera.
+        camera: the frame source.
+        port: serial port overriding config.bus.port (the emulator's pty in a dry run).
+        on_close: callables run last by `close()` (e.g. stopping an emulator).
+        log: where progress messages go.
+    """
+
+    def __init__(self, config: HardwareConfig, *, spec: HandSpec, object_spec: ObjectSpec,
+                 calibration: CameraCalibration, camera: FrameSource, port: str | None = None,
+                 on_close: tuple[Callable[[], None], ...] = (),
+                 log: Callable[[str], None] = _log) -> None:
+        self.config = config
+        self._spec = spec
+        self._object = object_spec
+        self._calibration = calibration
+        self.camera = camera
+        self.log = log
+        self._on_close = on_close
+        self._closed = False
+        self._stopped = ""  # why the hand was stopped, if it was
+        self._old_signals: dict[int, Any] = {}
+        self.finger_ids = [f.id for f in config.fingers]
+        self.bus = MotorBus(port or config.bus.port, config.bus.baud, labels=config.labels,
+                            latency_ms=config.bus.latency_ms, retries=config.bus.retries)
+        self.tendons: TendonMap | None = None
+        self._u = np.zeros(len(self.finger_ids))
+        atexit.register(self.close)
+        self._install_signal_handlers()
+        try:
+            self._start()
+        except BaseException:
+            self.close()
+            raise
+
+    # ----------------------------------------------------------------- Hand interface
+    @property
+    def spec(self) -> HandSpec:
+        return self._spec
+
+    @property
+    def object_spec(self) -> ObjectSpec:
+        return self._object
+
+    @property
+    def calibration(self) -> CameraCalibration:
+        return self._calibration
+
+    @property
+    def commands(self) -> np.ndarray:
+        return self._u.copy()
+
+    def grasp(self) -> ApplyReport:
+        """Close to the configured grasp commands in steps of at most motion.max_step, settle,
+        and check the grasp (GraspError if the object's tag is not seen, when checked)."""
+        target = np.asarray(self.config.grasp.commands)
+        settled = True
+        with self._guarded():
+            while np.any(np.abs(target - self._u) > 1e-9):
+                step = np.clip(target - self._u, -self.config.motion.max_step,
+                               self.config.motion.max_step)
+                settled = self._move_to(self._u + step)
+        held, message = self._grasp_status()
+        if not held:
+            raise GraspError(f"no grasp at commands {np.round(self._u * 1e3, 2).tolist()} mm: "
+                             f"{message}")
+        return ApplyReport(commands=self.commands, settled=settled, grasp_held=True)
+
+    def apply(self, delta: np.ndarray) -> ApplyReport:
+        """Change the tendon commands by `delta` [m], clipped to motion.range, ramped; then
+        wait until the motors stop (bounded by motion.settle_timeout)."""
+        m = self.config.motion
+        d = check_delta(delta, len(self.finger_ids), m.max_step)
+        target = np.clip(self._u + d, m.range[0], m.range[1])
+        if np.any(target != self._u + d):
+            self.log(f"tendon commands clipped to motion.range {list(m.range)} m: "
+                     f"{np.round((self._u + d) * 1e3, 3).tolist()} mm -> "
+                     f"{np.round(target * 1e3, 3).tolist()} mm")
+        with self._guarded():
+            settled = self._move_to(target)
+        held, message = self._grasp_status()
+        return ApplyReport(commands=self.commands, settled=settled, grasp_held=held,
+                           message=message)
+
+    def grab_frame(self) -> Frame | None:
+        image = self.camera.read()
+        if image is None:
+            return None
+        return Frame(image=image, stamp=time.monotonic())
+
+    def close(self) -> None:
+        """Torque off (broadcast, then each motor), close the port, the camera and whatever
+        `on_close` holds. Safe to call more than once."""
+        if self._closed:
+            return
+        self._closed = True
+        try:
+            if self.bus.connected:
+                for problem in self.bus.torque_off_everywhere(self.config.ids):
+                    self.log(f"WARNING: {problem}")
+        finally:
+            self.bus.close()
+            with contextlib.suppress(Exception):
+                self.camera.close()
+            for fn in self._on_close:
+                with contextlib.suppress(Exception):
+                    fn()
+            self._restore_signal_handlers()
+            atexit.unregister(self.close)
+
+    def __enter__(self) -> HardwareHand:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ----------------------------------------------------------------- start-up
+    def _start(self) -> None:
+        cfg = self.config
+        self.bus.connect()
+        for dxl_id in cfg.ids:
+            model = self.bus.ping(dxl_id)
+            if model not in MODEL_NUMBERS:
+                self.log(f"{self.bus.label(dxl_id)} is model number {model}, not a known "
+                         "X-series motor; continuing with the X-series control table")
+        # (A motor in a hardware error state fails its ping with the decoded bits.)
+        # EEPROM settings need torque off.
+        self.bus.set_torque(cfg.ids, False)
+        m = cfg.motion
+        need_probe = any(f.zero is None for f in cfg.fingers)
+        first_mode = OperatingMode.CURRENT_BASED_POSITION if need_probe else m.mode
+        for dxl_id in self.finger_ids:
+            self.bus.write(Reg.OPERATING_MODE, dxl_id, int(first_mode))
+            self.bus.write(Reg.CURRENT_LIMIT, dxl_id, int(m.current_limit_ma / CURRENT_UNIT_MA))
+            self.bus.write(Reg.PROFILE_VELOCITY, dxl_id,
+                           int(round(m.profile_velocity_rpm / VELOCITY_UNIT_RPM)))
+        self._torque_on_in_place(self.finger_ids, first_mode)
+        if need_probe:
+            zeros = find_zeros(self.bus, cfg.fingers, cfg.calibration, m.spool_radius,
+                               settle_timeout=m.settle_timeout, log=self.log)
+            self.log("tendon zeros found; to skip the probe next time, put them in "
+                     f"{cfg.path}: " + ", ".join(f"fingers.{s}.zero: {z}" for s, z in
+                                                zeros.items()))
+            if m.mode != first_mode:
+                self.bus.set_torque(self.finger_ids, False)
+                for dxl_id in self.finger_ids:
+                    self.bus.write(Reg.OPERATING_MODE, dxl_id, int(m.mode))
+                self._torque_on_in_place(self.finger_ids, m.mode)
+            zero_ticks = [zeros[f.slot] for f in cfg.fingers]
+        else:
+            present = self.bus.sync_read_one(Reg.PRESENT_POSITION, self.finger_ids)
+            zero_ticks = [resolve_zero(f.zero, present[f.id], f.direction, m.spool_radius,
+                                       m.range) for f in cfg.fingers]
+        self.tendons = TendonMap(zeros=tuple(zero_ticks),
+                                 directions=tuple(f.direction for f in cfg.fingers),
+                                 spool_radius=m.spool_radius)
+        if m.mode == OperatingMode.CURRENT_BASED_POSITION:
+            cap = int(m.current_limit_ma / CURRENT_UNIT_MA)
+            for dxl_id in self.finger_ids:
+                self.bus.write(Reg.GOAL_CURRENT, dxl_id, cap)
+        if cfg.spread is not None:
+            s = cfg.spread
+            self.bus.write(Reg.OPERATING_MODE, s.id, int(OperatingMode.POSITION))
+            self.bus.write(Reg.PROFILE_VELOCITY, s.id,
+                           int(round(m.profile_velocity_rpm / VELOCITY_UNIT_RPM)))
+            # Goal after torque on: enabling torque may reset the goal to the present position.
+            self.bus.write(Reg.TORQUE_ENABLE, s.id, 1)
+            self.bus.write(Reg.GOAL_POSITION, s.id, s.position)
+        present = self.bus.sync_read_one(Reg.PRESENT_POSITION, self.finger_ids)
+        self._u = self.tendons.commands([present[i] for i in self.finger_ids])
+        # Open the hand: back to u = 0 (clipped to the range), in allowed steps.
+        with self._guarded():
+            home = np.clip(np.zeros_like(self._u), m.range[0], m.range[1])
+            start = np.clip(self._u, m.range[0] - m.max_step, m.range[1] + m.max_step)
+            self._u = start
+            while np.any(np.abs(home - self._u) > 1e-9):
+                self._move_to(self._u + np.clip(home - self._u, -m.max_step, m.max_step))
+            if cfg.spread is not None:
+                wait_until_stopped(self.bus, [cfg.spread.id], m.settle_timeout, m.settle_ticks,
+                                   CURRENT_UNIT_MA)
+
+    def _torque_on_in_place(self, ids: list[int], mode: OperatingMode) -> None:
+        """Torque on without a jump: goal := present position first."""
+        present = self.bus.sync_read_one(Reg.PRESENT_POSITION, ids)
+        for dxl_id in ids:
+            self.bus.write(Reg.GOAL_POSITION, dxl_id, present[dxl_id])
+        self.bus.set_torque(ids, True)
+
+    # ----------------------------------------------------------------- moving
+    def _move_to(self, target: np.ndarray) -> bool:
+        """Ramp the goal positions from the current commands to `target`, then wait until
+        the motors stop. Returns whether they stopped within motion.settle_timeout."""
+        if self._stopped:
+            raise HardwareError(f"the hand was stopped after an error ({self._stopped}); "
+                                "close it and open it again")
+        assert self.tendons is not None
+        m = self.config.motion
+        start = self._u.copy()
+        for k in range(1, m.ramp_steps + 1):
+            t0 = time.monotonic()
+            u = start + (target - start) * (k / m.ramp_steps)
+            self.bus.sync_write(Reg.GOAL_POSITION,
+                                dict(zip(self.finger_ids, self.tendons.ticks(u), strict=True)))
+            self._u = u
+            # A read per step: its status bytes reveal a motor fault mid-ramp.
+            read_motion(self.bus, self.finger_ids, CURRENT_UNIT_MA)
+            time.sleep(max(0.0, m.ramp_period - (time.monotonic() - t0)))
+        self._u = np.asarray(target, dtype=float).copy()
+        settled, _ = wait_until_stopped(self.bus, self.finger_ids, m.settle_timeout,
+                                        m.settle_ticks, CURRENT_UNIT_MA)
+        return settled
+
+    @contextlib.contextmanager
+    def _guarded(self) -> Iterator[None]:
+        """Any exception while the motors move (including Ctrl-C) switches torque off."""
+        try:
+            yield
+        except BaseException as exc:
+            self._stopped = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+            if self.bus.connected:
+                for problem in self.bus.torque_off_everywhere(self.config.ids):
+                    self.log(f"WARNING: {problem}")
+            raise
+
+    def _grasp_status(self) -> tuple[bool, str]:
+        """Whether the object is held, as far as the palm camera can tell."""
+        if not self.config.grasp.check_tag:
+            return True, ""
+        image = self.camera.read()
+        if image is None:
+            return True, ""  # no frame: unknown, so not a failure
+        from vlr.perception.detect import detect_tags
+
+        gray = image if image.ndim == 2 else image.mean(axis=2).astype(np.uint8)
+        if any(d.tag_id == self._object.tag_id for d in detect_tags(gray)):
+            return True, ""
+        return False, (f"the object's tag (36h11 id {self._object.tag_id}) is not seen by the "
+                       "palm camera")
+
+    # ----------------------------------------------------------------- signals
+    def _install_signal_handlers(self) -> None:
+        """SIGTERM/SIGHUP -> SystemExit, so `finally` blocks and atexit switch torque off
+        (their default action kills the process with torque still on)."""
+        if threading.current_thread() is not threading.main_thread():
+            return
+        for sig in (signal.SIGTERM, signal.SIGHUP):
+            if signal.getsignal(sig) is signal.SIG_DFL:
+                self._old_signals[sig] = signal.signal(sig, _exit_on_signal)
+
+    def _restore_signal_handlers(self) -> None:
+        if threading.current_thread() is not threading.main_thread():
+            return
+        for sig, old in self._old_signals.items():
+            with contextlib.suppress(ValueError, OSError):
+                signal.signal(sig, old)
+        self._old_signals.clear()
+
+
+def _exit_on_signal(signum: int, frame: object) -> None:
+    raise SystemExit(128 + signum)
+
+
+def open_hand(*, config: str, **ignored: Any) -> HardwareHand:
+    """Backend factory for the CLI: `vlr ... --backend hardware --config FILE`.
+
+    Other options the CLI passes (object, seed, ...) are ignored: the config file says which
+    object is grasped. With bus.port "emulator" the motors are emulated in-process (a dry
+    run; see hardware/README.md).
+    """
+    cfg = load_config(config)
+    spec = load_hand(cfg.hand)
+    object_spec = load_object(cfg.object)
+    on_close: list[Callable[[], None]] = []
+    try:
+        port = None
+        plant = None
+        if cfg.bus.port == EMULATOR_PORT:
+            from hardware.emulate import build_emulator
+
+            emulator, plant = build_emulator(cfg)
+            port = emulator.start()
+            on_close.append(emulator.stop)
+            if hasattr(plant, "close"):
+                on_close.append(plant.close)
+        if cfg.camera.calibration is not None:
+            from vlr.camera import load_calibration
+
+            calibration = load_calibration(cfg.camera.calibration)
+        else:
+            calibration = plant.calibration  # camera.fake "sim" (checked by load_config)
+        camera = _camera(cfg, calibration, plant)
+    except BaseException:
+        for fn in reversed(on_close):
+            fn()
+        raise
+    return HardwareHand(cfg, spec=spec, object_spec=object_spec, calibration=calibration,
+                        camera=camera, port=port, on_close=tuple(reversed(on_close)))
+
+
+def _camera(cfg: HardwareConfig, calibration: CameraCalibration, plant: Any) -> FrameSource:
+    if cfg.camera.fake == "blank":
+        return FakeCamera(calibration.width, calibration.height)
+    if cfg.camera.fake == "sim":
+        if plant is None or not hasattr(plant, "render"):
+            raise HardwareError("camera.fake 'sim' needs bus.port 'emulator' with "
+                                "emulator.plant 'sim' (frames come from the simulated hand)")
+        return FakeCamera(calibration.width, calibration.height, source=plant.render)
+    assert cfg.camera.index is not None
+    return OpenCVCamera(cfg.camera.index, calibration.width, calibration.height)
