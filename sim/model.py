@@ -78,7 +78,7 @@ def build_finger(spec: FingerSpec, slot: str) -> mjcf.RootElement:
     prox = root.worldbody.add("body", name="proximal")
     prox.add("joint", name="proximal", type="hinge", axis=[-1, 0, 0], range=[lo_p, hi_p],
              limited=True, stiffness=spec.stiffness[0], springref=spec.rest_angles[0],
-             damping=JOINT_DAMPING, armature=JOINT_ARMATURE)
+             damping=JOINT_DAMPING, armature=JOINT_ARMATURE, solreflimit=list(SOLREF))
     prox.add("inertial", pos=list(spec.link_coms[0]), mass=spec.link_masses[0],
              diaginertia=_box_inertia(spec.link_masses[0], w, 2 * half_t,
                                       spec.proximal_length))
@@ -88,7 +88,7 @@ def build_finger(spec: FingerSpec, slot: str) -> mjcf.RootElement:
     dist = prox.add("body", name="distal", pos=[0, 0, lp])
     dist.add("joint", name="distal", type="hinge", axis=[-1, 0, 0], range=[lo_d, hi_d],
              limited=True, stiffness=spec.stiffness[1], springref=spec.rest_angles[1],
-             damping=JOINT_DAMPING, armature=JOINT_ARMATURE)
+             damping=JOINT_DAMPING, armature=JOINT_ARMATURE, solreflimit=list(SOLREF))
     dist.add("inertial", pos=list(spec.link_coms[1]), mass=spec.link_masses[1],
              diaginertia=_box_inertia(spec.link_masses[1], w, 2 * half_t, spec.distal_length))
     pc = np.asarray(spec.pad_center)
@@ -280,9 +280,9 @@ def _add_tag(root: mjcf.RootElement, body, obj: ObjectSpec) -> None:
     body.add("site", name="pom", pos=[0, 0, 0], size=[0.001])
 
 
-def build_scene(hand: HandSpec, obj: ObjectSpec, *, width: int = 640, height: int = 480,
-                fovy_deg: float = CAMERA_FOVY_DEG) -> mjcf.RootElement:
-    """Palm + fingers on their slots + the object with a helper weld for grasping."""
+def build_hand(hand: HandSpec, *, width: int = 640, height: int = 480,
+               fovy_deg: float = CAMERA_FOVY_DEG) -> mjcf.RootElement:
+    """Palm + fingers on their slots + tendon actuators (no object)."""
     root = build_palm(hand, width, height, fovy_deg)
     root.worldbody.add("light", name="top_light", pos=[0, 0, 0.6], dir=[0, 0, -1],
                        directional=True, castshadow=False, diffuse=[0.5, 0.5, 0.5])
@@ -296,6 +296,13 @@ def build_scene(hand: HandSpec, obj: ObjectSpec, *, width: int = 640, height: in
                           kp=hand.tendon_stiffness, kv=TENDON_DAMPING,
                           forcerange=[-TENDON_FORCE_MAX, 0], forcelimited=True,
                           ctrlrange=[-1.0, 1.0], ctrllimited=True)
+    return root
+
+
+def build_scene(hand: HandSpec, obj: ObjectSpec, *, width: int = 640, height: int = 480,
+                fovy_deg: float = CAMERA_FOVY_DEG) -> mjcf.RootElement:
+    """Palm + fingers on their slots + the object with a helper weld for grasping."""
+    root = build_hand(hand, width=width, height=height, fovy_deg=fovy_deg)
     objroot = build_object(obj)
     frame = root.worldbody.attach(objroot)
     frame.pos = [0, 0, obj.grasp_height]
