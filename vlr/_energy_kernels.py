@@ -1,0 +1,511 @@
+"""Numba kernels of the motion model (Eq. 6-9): energy terms, their gradients and Hessians,
+and the batched damped-Newton (Levenberg-Marquardt) solve. Internal to `vlr.motion`.
+
+Unknowns of one particle: the joint angles theta (N, K) and a small pose change of the object,
+(dp, dw) with p <- p + dp, R <- R exp([dw]x). The Hessian has an arrow structure: finger
+blocks A_i (K x K) that couple only through the object block C (6 x 6) via B_i (K x 6), so the
+Newton system is solved by eliminating the finger blocks (Schur complement): O(N K^3 + 6^3)
+per particle instead of O((NK + 6)^3).
+
+Terms are identified by the codes below; `flags[code] != 0` enables a term. To add a term,
+write a `_term_*` device function with the common accumulate-into-(g, H) contract and call it
+from `_evaluate` (the NumPy reference in `vlr.motion` gets its energy alongside).
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+from numba import njit, prange
+
+SPRINGS, TENDON, LIMITS, LINK_GRAVITY, OBJECT_GRAVITY, CONTACTS = range(6)
+N_TERMS = 6
+
+# Solver status codes (per particle).
+OK, NONFINITE, NO_CONVERGENCE, JUMP, INACTIVE = 0, 1, 2, 3, 4
+
+# Indices into the float parameter vector `prm`.
+P_KC, P_KLIM, P_TOL_TH, P_TOL_P, P_MAX_DTH, P_MAX_DP, P_JUMP_TH, P_JUMP_P, P_MU0 = range(9)
+N_PRM = 9
+
+
+@njit(cache=True)
+def _finger_chain(th, seg, nrm, pcx, pcy, prad, sphi, cphi, qy, qz):
+    """Planar chain of one finger in F (Eq. 2): fills sin/cos of cumulative angles and joint
+    positions (y, z); returns the contact point (x, y, z) in F."""
+    k_n = th.shape[0]
+    phi = 0.0
+    qy[0] = 0.0
+    qz[0] = 0.0
+    for k in range(k_n):
+        phi += th[k]
+        sphi[k] = math.sin(phi)
+        cphi[k] = math.cos(phi)
+        if k < k_n - 1:
+            qy[k + 1] = qy[k] + seg[k] * sphi[k]
+            qz[k + 1] = qz[k] + seg[k] * cphi[k]
+    cdx = pcx + prad * nrm[0]
+    cdy = pcy + prad * nrm[1]
+    cdz = seg[k_n - 1] + prad * nrm[2]
+    s, c = sphi[k_n - 1], cphi[k_n - 1]
+    return (cdx, qy[k_n - 1] + cdy * c + cdz * s, qz[k_n - 1] - cdy * s + cdz * c)
+
+
+@njit(cache=True)
+def _evaluate(th, seg, nrm, anc, p, R, stiff, kt, u,
+              base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+              omass, ocom, grav, flags, prm,
+              gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk):
+    """Energy of one particle (Eq. 6, 7 compliant, 8 as penalty, limits, gravity) and its
+    gradient/Hessian in arrow form. th (N, K); p (3,); R (3, 3). Returns the energy [J]."""
+    n_f, k_n = th.shape
+    kc = prm[P_KC]
+    klim = prm[P_KLIM]
+    gA[:] = 0.0
+    gC[:] = 0.0
+    A[:] = 0.0
+    B[:] = 0.0
+    C[:] = 0.0
+    e = 0.0
+    for i in range(n_f):
+        cfx, cfy, cfz = _finger_chain(th[i], seg[i], nrm[i], pad_xy[i, 0], pad_xy[i, 1],
+                                      pad_r[i], sphi, cphi, qy, qz)
+        rb = base_rot[i]
+        # Eq. 6: springs about the rest angles.
+        if flags[SPRINGS] != 0:
+            for k in range(k_n):
+                d = th[i, k] - rest[i, k]
+                e += 0.5 * stiff[i, k] * d * d
+                gA[i, k] += stiff[i, k] * d
+                A[i, k, k] += stiff[i, k]
+        # Joint limits as stiff one-sided penalties (METHOD.md 8.2).
+        if flags[LIMITS] != 0:
+            for k in range(k_n):
+                d = 0.0
+                if th[i, k] < lo[i, k]:
+                    d = th[i, k] - lo[i, k]
+                elif th[i, k] > hi[i, k]:
+                    d = th[i, k] - hi[i, k]
+                if d != 0.0:
+                    e += 0.5 * klim * d * d
+                    gA[i, k] += klim * d
+                    A[i, k, k] += klim
+        # Eq. 7, compliant: 1/2 k_t max(0, u - s)^2, s = sum r_k (theta_k - lo_k).
+        if flags[TENDON] != 0:
+            s = 0.0
+            for k in range(k_n):
+                s += radii[i, k] * (th[i, k] - lo[i, k])
+            slack = u[i] - s
+            if slack > 0.0:
+                e += 0.5 * kt[i] * slack * slack
+                for k in range(k_n):
+                    gA[i, k] -= kt[i] * slack * radii[i, k]
+                    for m in range(k_n):
+                        A[i, k, m] += kt[i] * radii[i, k] * radii[i, m]
+        # Gravity potential of the finger links: -m g . x_com.
+        if flags[LINK_GRAVITY] != 0:
+            gfx = rb[0, 0] * grav[0] + rb[1, 0] * grav[1] + rb[2, 0] * grav[2]
+            gfy = rb[0, 1] * grav[0] + rb[1, 1] * grav[1] + rb[2, 1] * grav[2]
+            gfz = rb[0, 2] * grav[0] + rb[1, 2] * grav[1] + rb[2, 2] * grav[2]
+            gb = grav[0] * base_pos[i, 0] + grav[1] * base_pos[i, 1] + grav[2] * base_pos[i, 2]
+            for k in range(k_n):
+                m_k = lmass[i, k]
+                cy, cz = lcom[i, k, 1], lcom[i, k, 2]
+                py = qy[k] + cy * cphi[k] + cz * sphi[k]
+                pz = qz[k] - cy * sphi[k] + cz * cphi[k]
+                e -= m_k * (gb + gfx * lcom[i, k, 0] + gfy * py + gfz * pz)
+                for j in range(k + 1):
+                    dy = py - qy[j]
+                    dz = pz - qz[j]
+                    # d x / d theta_j = (-x) cross (x - q_j) = (0, dz, -dy)
+                    gA[i, j] -= m_k * (gfy * dz - gfz * dy)
+                    for m in range(j, k + 1):
+                        # second derivative about joint max(j, m): -(0, dy', dz')
+                        dy2 = py - qy[m]
+                        dz2 = pz - qz[m]
+                        h = m_k * (gfy * dy2 + gfz * dz2)
+                        A[i, j, m] += h
+                        if m != j:
+                            A[i, m, j] += h
+        # Eq. 8 as a stiff penalty: the contact (fixed in D) stays at its anchor (fixed in O).
+        if flags[CONTACTS] != 0:
+            ax, ay, az = anc[i, 0], anc[i, 1], anc[i, 2]
+            r = vk[0]
+            for a in range(3):
+                r[a] = (base_pos[i, a] + rb[a, 0] * cfx + rb[a, 1] * cfy + rb[a, 2] * cfz
+                        - p[a] - (R[a, 0] * ax + R[a, 1] * ay + R[a, 2] * az))
+            e += 0.5 * kc * (r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
+            # jac[j] = d contact / d theta_j in the palm frame
+            for j in range(k_n):
+                dy = cfy - qy[j]
+                dz = cfz - qz[j]
+                for a in range(3):
+                    jac[j, a] = rb[a, 1] * dz - rb[a, 2] * dy
+            # M = R [a]x : d r / d w
+            for a in range(3):
+                M[a, 0] = R[a, 1] * az - R[a, 2] * ay
+                M[a, 1] = -R[a, 0] * az + R[a, 2] * ax
+                M[a, 2] = R[a, 0] * ay - R[a, 1] * ax
+            for j in range(k_n):
+                gA[i, j] += kc * (jac[j, 0] * r[0] + jac[j, 1] * r[1] + jac[j, 2] * r[2])
+                for m in range(j, k_n):
+                    dy2 = cfy - qy[m]
+                    dz2 = cfz - qz[m]
+                    # r . R_b (0, -dy', -dz'): the geometric (force x curvature) part
+                    geo = -(r[0] * (rb[0, 1] * dy2 + rb[0, 2] * dz2)
+                            + r[1] * (rb[1, 1] * dy2 + rb[1, 2] * dz2)
+                            + r[2] * (rb[2, 1] * dy2 + rb[2, 2] * dz2))
+                    h = kc * (jac[j, 0] * jac[m, 0] + jac[j, 1] * jac[m, 1]
+                              + jac[j, 2] * jac[m, 2] + geo)
+                    A[i, j, m] += h
+                    if m != j:
+                        A[i, m, j] += h
+                for b in range(3):
+                    B[i, j, b] -= kc * jac[j, b]
+                    B[i, j, 3 + b] += kc * (jac[j, 0] * M[0, b] + jac[j, 1] * M[1, b]
+                                            + jac[j, 2] * M[2, b])
+            lam = vk[1]
+            for b in range(3):
+                gC[b] -= kc * r[b]
+                gC[3 + b] += kc * (M[0, b] * r[0] + M[1, b] * r[1] + M[2, b] * r[2])
+                lam[b] = R[0, b] * r[0] + R[1, b] * r[1] + R[2, b] * r[2]
+            la = lam[0] * ax + lam[1] * ay + lam[2] * az
+            av = (ax, ay, az)
+            for b in range(3):
+                C[b, b] += kc
+                for c in range(3):
+                    C[b, 3 + c] -= kc * M[b, c]
+                    C[3 + c, b] -= kc * M[b, c]
+                    mtm = M[0, b] * M[0, c] + M[1, b] * M[1, c] + M[2, b] * M[2, c]
+                    geo = 0.5 * (lam[b] * av[c] + av[b] * lam[c])
+                    if b == c:
+                        geo -= la
+                    C[3 + b, 3 + c] += kc * (mtm - geo)
+    # Gravity potential of the object: -m g . (p + R com).
+    if flags[OBJECT_GRAVITY] != 0:
+        cx, cy, cz = ocom[0], ocom[1], ocom[2]
+        wx = p[0] + R[0, 0] * cx + R[0, 1] * cy + R[0, 2] * cz
+        wy = p[1] + R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz
+        wz = p[2] + R[2, 0] * cx + R[2, 1] * cy + R[2, 2] * cz
+        e -= omass * (grav[0] * wx + grav[1] * wy + grav[2] * wz)
+        gam = vk[2]
+        for b in range(3):
+            gC[b] -= omass * grav[b]
+            gam[b] = R[0, b] * grav[0] + R[1, b] * grav[1] + R[2, b] * grav[2]
+        # d/dw: -m (com x gamma)
+        gC[3] -= omass * (cy * gam[2] - cz * gam[1])
+        gC[4] -= omass * (cz * gam[0] - cx * gam[2])
+        gC[5] -= omass * (cx * gam[1] - cy * gam[0])
+        gc = gam[0] * cx + gam[1] * cy + gam[2] * cz
+        cv = (cx, cy, cz)
+        for b in range(3):
+            for c in range(3):
+                h = 0.5 * (gam[b] * cv[c] + cv[b] * gam[c])
+                if b == c:
+                    h -= gc
+                C[3 + b, 3 + c] -= omass * h
+    return e
+
+
+@njit(cache=True)
+def _chol(M, n):
+    """In-place lower Cholesky of the leading n x n block; False if not positive definite."""
+    for j in range(n):
+        s = M[j, j]
+        for k in range(j):
+            s -= M[j, k] * M[j, k]
+        if not s > 0.0:
+            return False
+        d = math.sqrt(s)
+        M[j, j] = d
+        for i in range(j + 1, n):
+            t = M[i, j]
+            for k in range(j):
+                t -= M[i, k] * M[j, k]
+            M[i, j] = t / d
+    return True
+
+
+@njit(cache=True)
+def _chol_solve(L, n, b):
+    """Solve (L L^T) x = b in place for vector b."""
+    for i in range(n):
+        t = b[i]
+        for k in range(i):
+            t -= L[i, k] * b[k]
+        b[i] = t / L[i, i]
+    for i in range(n - 1, -1, -1):
+        t = b[i]
+        for k in range(i + 1, n):
+            t -= L[k, i] * b[k]
+        b[i] = t / L[i, i]
+
+
+@njit(cache=True)
+def _newton_step(gA, gC, A, B, C, mu, dth, dc, La, X, y, S, col):
+    """Damped Newton step (H + mu D) d = -g by Schur complement on the arrow structure.
+
+    D is Marquardt's diag(|H|) plus a small floor, so that damping is scale-free across
+    radians and metres. Returns False if a block is not positive definite."""
+    n_f, k_n = gA.shape
+    for a in range(6):
+        for b in range(6):
+            S[a, b] = C[a, b]
+        S[a, a] += mu * (abs(C[a, a]) + 1e-9)
+        dc[a] = -gC[a]
+    for i in range(n_f):
+        for a in range(k_n):
+            for b in range(k_n):
+                La[a, b] = A[i, a, b]
+            La[a, a] += mu * (abs(A[i, a, a]) + 1e-9)
+        if not _chol(La, k_n):
+            return False
+        for a in range(k_n):
+            y[i, a] = -gA[i, a]
+        _chol_solve(La, k_n, y[i])
+        for c in range(6):
+            for a in range(k_n):
+                col[a] = B[i, a, c]
+            _chol_solve(La, k_n, col)
+            for a in range(k_n):
+                X[i, a, c] = col[a]
+        # S -= B^T X ; rhs -= B^T y
+        for a in range(6):
+            t = 0.0
+            for m in range(k_n):
+                t += B[i, m, a] * y[i, m]
+            dc[a] -= t
+            for b in range(6):
+                t = 0.0
+                for m in range(k_n):
+                    t += B[i, m, a] * X[i, m, b]
+                S[a, b] -= t
+    if not _chol(S, 6):
+        return False
+    _chol_solve(S, 6, dc)
+    for i in range(n_f):
+        for a in range(k_n):
+            t = y[i, a]
+            for c in range(6):
+                t -= X[i, a, c] * dc[c]
+            dth[i, a] = t
+    return True
+
+
+@njit(cache=True)
+def _rotate3(R, w0, w1, w2, out):
+    """out = R exp([w]x) (Rodrigues), w = (w0, w1, w2)."""
+    ang = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    e00, e01, e02, e10, e11, e12, e20, e21, e22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+    if ang > 1e-300:
+        kx, ky, kz = w0 / ang, w1 / ang, w2 / ang
+        s, c = math.sin(ang), math.cos(ang)
+        v = 1.0 - c
+        e00 = c + kx * kx * v
+        e01 = kx * ky * v - kz * s
+        e02 = kx * kz * v + ky * s
+        e10 = ky * kx * v + kz * s
+        e11 = c + ky * ky * v
+        e12 = ky * kz * v - kx * s
+        e20 = kz * kx * v - ky * s
+        e21 = kz * ky * v + kx * s
+        e22 = c + kz * kz * v
+    for a in range(3):
+        r0, r1, r2 = R[a, 0], R[a, 1], R[a, 2]
+        out[a, 0] = r0 * e00 + r1 * e10 + r2 * e20
+        out[a, 1] = r0 * e01 + r1 * e11 + r2 * e21
+        out[a, 2] = r0 * e02 + r1 * e12 + r2 * e22
+
+
+@njit(cache=True)
+def _solve_one(q, theta, seg, nrm, anc, pos, rot, stiff, kt, u,
+               base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+               omass, ocom, grav, flags, prm, max_iter,
+               gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk,
+               th_t, p_t, R_t, dth, dc, La, X, y, S, col, th0, p0):
+    """Damped Newton (Levenberg-Marquardt) for particle q, warm-started from its state.
+    Updates theta[q], pos[q], rot[q] in place; returns (status, iterations)."""
+    n_f, k_n = theta.shape[1], theta.shape[2]
+    th = theta[q]
+    p = pos[q]
+    R = rot[q]
+    for i in range(n_f):
+        for k in range(k_n):
+            th0[i, k] = th[i, k]
+    for a in range(3):
+        p0[a] = p[a]
+    e = _evaluate(th, seg[q], nrm[q], anc[q], p, R, stiff[q], kt[q], u,
+                  base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+                  omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk)
+    if not math.isfinite(e):
+        return NONFINITE, 0
+    mu = prm[P_MU0]
+    converged = False
+    it = 0
+    while it < max_iter:
+        it += 1
+        if not _newton_step(gA, gC, A, B, C, mu, dth, dc, La, X, y, S, col):
+            mu *= 10.0
+            if mu > 1e12:
+                break
+            continue
+        # Directional derivative, needed by the line search (buffers get overwritten).
+        gd = 0.0
+        for i in range(n_f):
+            for k in range(k_n):
+                gd += gA[i, k] * dth[i, k]
+        for a in range(6):
+            gd += gC[a] * dc[a]
+        # Step limit: keep each Newton step inside the region where the model is smooth.
+        big_th = 0.0
+        for i in range(n_f):
+            for k in range(k_n):
+                big_th = max(big_th, abs(dth[i, k]))
+        big_p = math.sqrt(dc[0] * dc[0] + dc[1] * dc[1] + dc[2] * dc[2])
+        big_w = math.sqrt(dc[3] * dc[3] + dc[4] * dc[4] + dc[5] * dc[5])
+        if not math.isfinite(big_th + big_p + big_w + gd):
+            return NONFINITE, it
+        t = 1.0
+        if big_th > prm[P_MAX_DTH]:
+            t = min(t, prm[P_MAX_DTH] / big_th)
+        if big_w > prm[P_MAX_DTH]:
+            t = min(t, prm[P_MAX_DTH] / big_w)
+        if big_p > prm[P_MAX_DP]:
+            t = min(t, prm[P_MAX_DP] / big_p)
+        small = (big_th < prm[P_TOL_TH] and big_p < prm[P_TOL_P] and big_w < prm[P_TOL_TH])
+        # Backtracking line search (Armijo, quadratic interpolation): the geometric
+        # stiffness of a loaded grasp changes fast, so the quadratic model overshoots on
+        # steps of a few degrees; halving LM damping alone took 10-30 iterations.
+        accepted = False
+        e_t = e
+        tol_e = 1e-15 + 1e-13 * abs(e)
+        for _ls in range(8):
+            for i in range(n_f):
+                for k in range(k_n):
+                    th_t[i, k] = th[i, k] + t * dth[i, k]
+            for a in range(3):
+                p_t[a] = p[a] + t * dc[a]
+            w0, w1, w2 = t * dc[3], t * dc[4], t * dc[5]
+            _rotate3(R, w0, w1, w2, R_t)
+            e_t = _evaluate(th_t, seg[q], nrm[q], anc[q], p_t, R_t, stiff[q], kt[q], u,
+                            base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy,
+                            pad_r, omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi,
+                            qy, qz, jac, M, vk)
+            if math.isfinite(e_t) and e_t <= e + 1e-4 * t * gd + tol_e:
+                accepted = True
+                break
+            if small:
+                break
+            denom = 2.0 * (e_t - e - gd * t)
+            t_new = 0.5 * t
+            if math.isfinite(e_t) and denom > 0.0:
+                t_new = -gd * t * t / denom
+            t = min(max(t_new, 0.1 * t), 0.5 * t)
+        if accepted:
+            for i in range(n_f):
+                for k in range(k_n):
+                    th[i, k] = th_t[i, k]
+            for a in range(3):
+                p[a] = p_t[a]
+                for b in range(3):
+                    R[a, b] = R_t[a, b]
+            e = e_t
+            if t == 1.0:
+                mu = max(mu * 0.1, 1e-12)
+            if small or (t * big_th < prm[P_TOL_TH] and t * big_p < prm[P_TOL_P]
+                         and t * big_w < prm[P_TOL_TH]):
+                converged = True
+                break
+        else:
+            if small:
+                # Round-off regime: the step is below tolerance yet cannot lower the energy.
+                converged = True
+                break
+            mu *= 10.0
+            if mu > 1e12:
+                break
+            e = _evaluate(th, seg[q], nrm[q], anc[q], p, R, stiff[q], kt[q], u,
+                          base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+                          omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz,
+                          jac, M, vk)
+    # Jump check: a change far beyond what the action can cause means another branch.
+    big = 0.0
+    for i in range(n_f):
+        for k in range(k_n):
+            big = max(big, abs(th[i, k] - th0[i, k]))
+    dp = math.sqrt((p[0] - p0[0]) ** 2 + (p[1] - p0[1]) ** 2 + (p[2] - p0[2]) ** 2)
+    if not (math.isfinite(big) and math.isfinite(dp) and math.isfinite(e)):
+        return NONFINITE, it
+    if not converged:
+        return NO_CONVERGENCE, it
+    if big > prm[P_JUMP_TH] or dp > prm[P_JUMP_P]:
+        return JUMP, it
+    return OK, it
+
+
+@njit(parallel=True, cache=True, fastmath=False)
+def solve_batch(theta, seg, nrm, anc, pos, rot, stiff, kt, u,
+                base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+                omass, ocom, grav, flags, prm, max_iter, active, status, iters):
+    """Equilibrium (Eq. 9) of every active particle at tendon command u, in place."""
+    n_p, n_f, k_n = theta.shape
+    n_chunks = min(n_p, 64)
+    for ch in prange(n_chunks):
+        # Scratch per chunk: allocating per particle would cost more than the solve.
+        gA = np.empty((n_f, k_n))
+        gC = np.empty(6)
+        A = np.empty((n_f, k_n, k_n))
+        B = np.empty((n_f, k_n, 6))
+        C = np.empty((6, 6))
+        sphi = np.empty(k_n)
+        cphi = np.empty(k_n)
+        qy = np.empty(k_n)
+        qz = np.empty(k_n)
+        jac = np.empty((k_n, 3))
+        M = np.empty((3, 3))
+        vk = np.empty((3, 3))
+        th_t = np.empty((n_f, k_n))
+        p_t = np.empty(3)
+        R_t = np.empty((3, 3))
+        dth = np.empty((n_f, k_n))
+        dc = np.empty(6)
+        La = np.empty((k_n, k_n))
+        X = np.empty((n_f, k_n, 6))
+        y = np.empty((n_f, k_n))
+        S = np.empty((6, 6))
+        col = np.empty(k_n)
+        th0 = np.empty((n_f, k_n))
+        p0 = np.empty(3)
+        start = ch * n_p // n_chunks
+        stop = (ch + 1) * n_p // n_chunks
+        for q in range(start, stop):
+            if not active[q]:
+                status[q] = INACTIVE
+                iters[q] = 0
+                continue
+            st, it = _solve_one(q, theta, seg, nrm, anc, pos, rot, stiff, kt, u,
+                                base_pos, base_rot, radii, rest, lo, hi, lmass, lcom,
+                                pad_xy, pad_r, omass, ocom, grav, flags, prm, max_iter,
+                                gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk,
+                                th_t, p_t, R_t, dth, dc, La, X, y, S, col, th0, p0)
+            status[q] = st
+            iters[q] = it
+
+
+@njit(cache=True)
+def evaluate_one(th, seg, nrm, anc, p, R, stiff, kt, u,
+                 base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+                 omass, ocom, grav, flags, prm, gA, gC, A, B, C):
+    """Energy, gradient and Hessian blocks of one particle (for tests and diagnostics)."""
+    k_n = th.shape[1]
+    sphi = np.empty(k_n)
+    cphi = np.empty(k_n)
+    qy = np.empty(k_n)
+    qz = np.empty(k_n)
+    jac = np.empty((k_n, 3))
+    M = np.empty((3, 3))
+    vk = np.empty((3, 3))
+    return _evaluate(th, seg, nrm, anc, p, R, stiff, kt, u,
+                     base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+                     omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk)

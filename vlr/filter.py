@@ -1,0 +1,425 @@
+"""The particle filter of the self-identification (Algorithm 1; METHOD.md 3, 8.2).
+
+One iteration: move every particle by the motion model with the common command u_t
+(Eq. 4, 9); predict its POM pose (Eq. 5); weight by the likelihood of the observed pose,
+tempered so that the effective sample size stays above a fraction of P; resample
+(systematic); jitter (Liu-West, scaled to the particle covariance) and re-derive each
+particle's POM anchor in its new contact frame.
+
+Sampled dimensions ("dims"), in this order: joint angles theta (N*K) [rad]; the contact on
+each pad as two angles (alpha, beta) per finger [rad] (`vlr.kinematics.normals_from_angles`);
+then the unknown parameters asked for, e.g. "stiffness:thumb.distal" [N m/rad],
+"length:left.proximal" [m], "tendon" or "tendon:thumb" [N/m]. Known parameters are not
+sampled (METHOD.md 3).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from vlr.kinematics import HandModel, angles_from_normals, normals_from_angles
+from vlr.motion import MotionConfig, MotionModel, ObjectParams, ParticleState
+from vlr.observation import ObservationModel, PoseObservation
+
+__all__ = [
+    "Unknown",
+    "parse_unknown",
+    "FilterConfig",
+    "Summary",
+    "IterationRecord",
+    "ParticleFilter",
+    "systematic_resample",
+    "effective_sample_size",
+    "temper",
+    "interval_width_deg",
+]
+
+
+# --------------------------------------------------------------------------- unknowns
+
+@dataclass(frozen=True)
+class Unknown:
+    """One unknown physical parameter sampled as a particle dimension (METHOD.md 3).
+
+    Attributes:
+        spec: the spec string, e.g. "stiffness:thumb.distal".
+        kind: "stiffness" | "length" | "tendon".
+        finger: finger index, or -1 for all fingers ("tendon" alone).
+        joint: joint index (stiffness, length), else -1.
+        prior: (low, high) of the uniform prior [SI units].
+    """
+
+    spec: str
+    kind: str
+    finger: int
+    joint: int
+    prior: tuple[float, float]
+
+
+def parse_unknown(spec: str, model: HandModel,
+                  prior: tuple[float, float] | None = None) -> Unknown:
+    """Parse "stiffness:FINGER.JOINT", "length:FINGER.JOINT", "tendon" or "tendon:FINGER".
+
+    Default priors (ours): stiffness 0.25-4x nominal; length 0.5-1.3x nominal (a replaced
+    finger may be much shorter: NF1 is 40 mm against 62 mm); tendon stiffness 0.5-2x nominal.
+    A "distal" length is the pad centre's offset along the distal link (kinematics.py).
+    """
+    kind, _, rest = spec.partition(":")
+    if kind == "tendon":
+        finger = model.finger_index(rest) if rest else -1
+        nominal = model.tendon_stiffness
+        lo, hi = prior or (0.5 * nominal, 2.0 * nominal)
+        return Unknown(spec, kind, finger, -1, (float(lo), float(hi)))
+    if kind not in ("stiffness", "length") or "." not in rest:
+        raise ValueError(f"unknown parameter spec {spec!r}; use stiffness:FINGER.JOINT, "
+                         "length:FINGER.JOINT, tendon or tendon:FINGER")
+    fname, jname = rest.split(".", 1)
+    i, k = model.finger_index(fname), model.joint_index(jname)
+    if kind == "stiffness":
+        nominal = model.stiffness[i, k]
+        lo, hi = prior or (0.25 * nominal, 4.0 * nominal)
+    else:
+        nominal = model.segments[i, k]
+        lo, hi = prior or (0.5 * nominal, 1.3 * nominal)
+    return Unknown(spec, kind, i, k, (float(lo), float(hi)))
+
+
+def _get_unknown(state: ParticleState, u: Unknown) -> np.ndarray:
+    if u.kind == "stiffness":
+        return state.stiffness[:, u.finger, u.joint]
+    if u.kind == "length":
+        return state.segments[:, u.finger, u.joint]
+    return state.tendon[:, max(u.finger, 0)]
+
+
+def _set_unknown(state: ParticleState, u: Unknown, values: np.ndarray) -> None:
+    if u.kind == "stiffness":
+        state.stiffness[:, u.finger, u.joint] = values
+    elif u.kind == "length":
+        state.segments[:, u.finger, u.joint] = values
+    elif u.finger < 0:
+        state.tendon[:, :] = values[:, None]
+    else:
+        state.tendon[:, u.finger] = values
+
+
+# --------------------------------------------------------------------------- pure helpers
+
+def systematic_resample(weights: np.ndarray, rng: np.random.Generator | None = None,
+                        offset: float | None = None) -> np.ndarray:
+    """Systematic resampling: indexes drawn with one uniform offset (filterpy's algorithm).
+
+    Same result as `filterpy.monte_carlo.systematic_resample` for the same offset, but with an
+    explicit Generator instead of NumPy's global RNG, and guarded against round-off: the
+    cumulative sum's last entry is set to exactly 1, so no index can fall past the end.
+
+    Args:
+        weights: (P,) non-negative weights summing to 1 (approximately).
+        rng: source of the offset (ignored if `offset` is given).
+        offset: the uniform offset in [0, 1), for tests.
+    Returns:
+        (P,) int indexes.
+    """
+    w = np.asarray(weights, dtype=float)
+    n = w.size
+    if offset is None:
+        if rng is None:
+            raise ValueError("pass an np.random.Generator or an offset")
+        offset = float(rng.random())
+    positions = (offset + np.arange(n)) / n
+    cumulative = np.cumsum(w)
+    cumulative[-1] = 1.0
+    idx = np.searchsorted(cumulative, positions, side="right")
+    return np.minimum(idx, n - 1)
+
+
+def effective_sample_size(weights: np.ndarray) -> float:
+    """ESS = 1 / sum w^2 for normalised weights."""
+    w = np.asarray(weights, dtype=float)
+    s = w.sum()
+    return float(1.0 / np.sum((w / s) ** 2)) if s > 0 else 0.0
+
+
+def temper(log_lik: np.ndarray, ess_fraction: float,
+           iterations: int = 30) -> tuple[np.ndarray, float]:
+    """Tempered weights w ~ L^beta with the largest beta in (0, 1] whose ESS >= ess_fraction P.
+
+    Early in a run the likelihood is sharp against a wide prior and plain weights collapse
+    onto a few dozen particles (METHOD.md 8.2); tempering keeps the particle set alive while
+    still moving it towards the observation. Bisection on beta.
+
+    Returns:
+        normalised weights (P,), beta.
+    """
+    ll = np.asarray(log_lik, dtype=float)
+    finite = np.isfinite(ll)
+    if not finite.any():
+        raise FloatingPointError("every particle has zero likelihood (all solves failed)")
+    ll = ll - ll[finite].max()
+    target = ess_fraction * ll.size
+
+    def weights(beta: float) -> np.ndarray:
+        w = np.where(finite, np.exp(beta * np.where(finite, ll, 0.0)), 0.0)
+        return w / w.sum()
+
+    w = weights(1.0)
+    if effective_sample_size(w) >= target or ess_fraction <= 0:
+        return w, 1.0
+    lo, hi = 0.0, 1.0
+    for _ in range(iterations):
+        mid = 0.5 * (lo + hi)
+        if effective_sample_size(weights(mid)) >= target:
+            lo = mid
+        else:
+            hi = mid
+    beta = max(lo, 1e-12)
+    return weights(beta), beta
+
+
+def interval_width_deg(theta_samples: np.ndarray) -> float:
+    """METHOD.md 3 convergence measure: mean over joint angles of the 95% interval width [deg].
+
+    theta_samples: (P, N*K) or (P, N, K) angles [rad] of equally weighted particles."""
+    t = np.asarray(theta_samples).reshape(len(theta_samples), -1)
+    q = np.quantile(t, [0.025, 0.975], axis=0)
+    return float(np.degrees(np.mean(q[1] - q[0])))
+
+
+# --------------------------------------------------------------------------- config and records
+
+@dataclass(frozen=True)
+class FilterConfig:
+    """Particle filter settings (units in brackets).
+
+    Attributes:
+        n_particles: P (the paper: 60,000).
+        seed: seed of the filter's np.random.Generator (all its randomness).
+        theta_spread: prior std of the joint angles about the nominal grasp [rad].
+        contact_spread: prior std of the pad contact angles (alpha, beta) [rad].
+        unknowns: unknown-parameter specs (`parse_unknown`).
+        priors: optional uniform prior (low, high) per unknown spec.
+        ess_fraction: tempering keeps ESS >= this fraction of P after weighting.
+        jitter_h: Liu-West kernel bandwidth h (METHOD.md 8.2: about 0.2).
+        liu_west_shrink: shrink towards the mean by sqrt(1 - h^2) so jitter keeps variance.
+        ci_threshold_deg: convergence when the mean 95% interval width of the joint angles
+            falls below this [deg] (METHOD.md 3).
+        motion: motion-model settings.
+        init_jump_theta: jump limit of the initial projection to equilibrium at u_0 [rad]
+            (the prior is wider than one action).
+        observation: likelihood scales.
+    """
+
+    n_particles: int = 60_000
+    seed: int = 0
+    theta_spread: float = float(np.radians(3.0))
+    contact_spread: float = 0.15
+    unknowns: tuple[str, ...] = ()
+    priors: dict[str, tuple[float, float]] = field(default_factory=dict)
+    ess_fraction: float = 0.5
+    jitter_h: float = 0.2
+    liu_west_shrink: bool = True
+    ci_threshold_deg: float = 2.0
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    init_jump_theta: float = 1.0
+    observation: ObservationModel = field(default_factory=ObservationModel)
+
+
+@dataclass(frozen=True)
+class Summary:
+    """Per-dimension mean and 95% interval of an equally weighted particle set."""
+
+    mean: np.ndarray
+    low: np.ndarray
+    high: np.ndarray
+
+    @classmethod
+    def of(cls, x: np.ndarray, weights: np.ndarray | None = None) -> Summary:
+        if weights is None:
+            q = np.quantile(x, [0.025, 0.975], axis=0)
+            return cls(mean=x.mean(axis=0), low=q[0], high=q[1])
+        w = weights / weights.sum()
+        mean = w @ x
+        order = np.argsort(x, axis=0)
+        cw = np.cumsum(w[order], axis=0)
+        cols = np.arange(x.shape[1])
+        lo = x[order[np.argmax(cw >= 0.025, axis=0), cols], cols]
+        hi = x[order[np.argmax(cw >= 0.975, axis=0), cols], cols]
+        return cls(mean=mean, low=lo, high=hi)
+
+
+@dataclass(frozen=True)
+class IterationRecord:
+    """What one filter iteration did, for history and plots.
+
+    prior: summary after the motion step (before weighting); posterior: after resampling,
+    before jitter (None for a prediction-only step). ci_deg: the convergence measure.
+    """
+
+    iteration: int
+    command: np.ndarray
+    prior: Summary
+    posterior: Summary | None
+    ess: float
+    beta: float
+    n_invalid: int
+    ci_deg: float
+
+
+# --------------------------------------------------------------------------- the filter
+
+class ParticleFilter:
+    """Algorithm 1 over `ParticleState`s, with the motion model of `vlr.motion`."""
+
+    def __init__(self, model: HandModel, obj: ObjectParams,
+                 config: FilterConfig | None = None) -> None:
+        self.model = model
+        self.config = config or FilterConfig()
+        self.motion = MotionModel(model, obj, self.config.motion)
+        self.obs_model = self.config.observation
+        self.unknowns = tuple(parse_unknown(s, model, self.config.priors.get(s))
+                              for s in self.config.unknowns)
+        self.rng = np.random.default_rng(self.config.seed)
+        self.state: ParticleState | None = None
+        self.history: list[IterationRecord] = []
+        self.iteration = 0
+        self.command: np.ndarray | None = None
+
+    # ---- packing of the sampled dimensions
+
+    @property
+    def dim_names(self) -> list[str]:
+        names = [f"theta:{f}.{k}" for f in self.model.names for k in range(self.model.n_joints)]
+        names += [f"contact:{f}.{a}" for f in self.model.names for a in ("alpha", "beta")]
+        return names + [u.spec for u in self.unknowns]
+
+    def pack(self, state: ParticleState) -> np.ndarray:
+        """(P, D) sampled dimensions of the particles (module docstring)."""
+        alpha, beta = angles_from_normals(state.normals)
+        cols = [state.theta.reshape(state.n, -1), np.stack([alpha, beta], -1).reshape(
+            state.n, -1)]
+        cols += [_get_unknown(state, u)[:, None] for u in self.unknowns]
+        return np.concatenate(cols, axis=1)
+
+    def unpack(self, x: np.ndarray, state: ParticleState) -> None:
+        """Write sampled dimensions back into `state` (in place)."""
+        nf, nk = self.model.n_fingers, self.model.n_joints
+        n_th = nf * nk
+        state.theta[...] = x[:, :n_th].reshape(-1, nf, nk)
+        ab = x[:, n_th:n_th + 2 * nf].reshape(-1, nf, 2)
+        state.normals[...] = normals_from_angles(ab[..., 0], ab[..., 1])
+        for j, u in enumerate(self.unknowns):
+            _set_unknown(state, u, x[:, n_th + 2 * nf + j])
+
+    # ---- Algorithm 1
+
+    def initialize(self, observation: PoseObservation, command: np.ndarray,
+                   nominal_theta: np.ndarray, nominal_contact: np.ndarray) -> IterationRecord:
+        """Sample the prior about the nominal grasp and weight it by the first observation.
+
+        Joint angles ~ N(nominal_theta, theta_spread); pad contact angles ~ N(nominal_contact,
+        contact_spread); unknowns ~ uniform priors. Each particle takes the observed POM pose
+        and derives its anchors from its own contacts, then settles to equilibrium at the
+        known command u_0 (METHOD.md 3: a focused prior that still covers the truth).
+
+        Args:
+            observation: first POM pose (palm frame).
+            command: u_0 (N,) [m].
+            nominal_theta: (N, K) [rad]; nominal_contact: (N, 2) (alpha, beta) [rad].
+        """
+        cfg, m, rng = self.config, self.model, self.rng
+        p = cfg.n_particles
+        nf = m.n_fingers
+        state = ParticleState.nominal(m, p, nominal_theta, np.zeros((nf, 3)) + [0, 1, 0],
+                                      np.asarray(observation.position, dtype=float),
+                                      np.asarray(observation.rotation, dtype=float))
+        state.theta += rng.normal(0.0, cfg.theta_spread, state.theta.shape)
+        ab = np.asarray(nominal_contact, dtype=float)[None] + rng.normal(
+            0.0, cfg.contact_spread, (p, nf, 2))
+        state.normals[...] = normals_from_angles(ab[..., 0], ab[..., 1])
+        for u in self.unknowns:
+            _set_unknown(state, u, rng.uniform(u.prior[0], u.prior[1], p))
+        state.anchor_to_pose(m)
+        self.state = state
+        self.command = np.asarray(command, dtype=float).copy()
+        init_cfg = replace(cfg.motion, jump_theta=cfg.init_jump_theta, jump_pos=0.05,
+                           max_iter=max(cfg.motion.max_iter, 100))
+        status, _ = self.motion.solve(state, self.command, init_cfg)
+        self.init_status = np.bincount(status, minlength=5)
+        return self._update(observation)
+
+    def step(self, command: np.ndarray, observation: PoseObservation | None) -> IterationRecord:
+        """One iteration of Algorithm 1 for the new absolute command u_t (N,) [m].
+
+        `observation` None (camera dropped the frame) makes it a prediction-only step."""
+        if self.state is None:
+            raise RuntimeError("initialize() first")
+        self.command = np.asarray(command, dtype=float).copy()
+        self.iteration += 1
+        self.motion.solve(self.state, self.command)
+        return self._update(observation)
+
+    def _update(self, observation: PoseObservation | None) -> IterationRecord:
+        cfg, state = self.config, self.state
+        x = self.pack(state)
+        prior = Summary.of(x[state.valid]) if state.valid.any() else Summary.of(x)
+        n_invalid = int((~state.valid).sum())
+        if observation is None:
+            rec = IterationRecord(self.iteration, self.command, prior, None, float("nan"),
+                                  float("nan"), n_invalid, self.ci_deg(x[state.valid]))
+            self.history.append(rec)
+            return rec
+        # Eq. 5 likelihood, tempered (METHOD.md 8.2).
+        log_lik = self.obs_model.log_likelihood(state, observation)
+        w, beta = temper(log_lik, cfg.ess_fraction)
+        ess = effective_sample_size(w)
+        # Resample (systematic), then jitter.
+        idx = systematic_resample(w, self.rng)
+        self.state = state = state.take(idx)
+        x = x[idx]
+        posterior = Summary.of(x)
+        ci = self.ci_deg(x)
+        self._jitter(x)
+        rec = IterationRecord(self.iteration, self.command, prior, posterior, ess, beta,
+                              n_invalid, ci)
+        self.history.append(rec)
+        return rec
+
+    def _jitter(self, x: np.ndarray) -> None:
+        """Liu-West kernel over the sampled dimensions, then re-anchor (METHOD.md 8.2).
+
+        x' = a x + (1 - a) mean + h L eps, with L L^T the particle covariance and
+        a = sqrt(1 - h^2): the kernel adds h^2 of the variance and the shrink removes it."""
+        cfg, state = self.config, self.state
+        h = cfg.jitter_h
+        mean = x.mean(axis=0)
+        cov = np.cov(x, rowvar=False)
+        d = cov.shape[0]
+        scale = np.sqrt(np.maximum(np.diag(cov), 0.0)) + 1e-12
+        corr = cov / np.outer(scale, scale) + 1e-9 * np.eye(d)
+        chol = np.linalg.cholesky(corr) * scale[:, None]
+        eps = self.rng.standard_normal(x.shape)
+        a = np.sqrt(1.0 - h * h) if cfg.liu_west_shrink else 1.0
+        x_new = a * x + (1.0 - a) * mean + h * eps @ chol.T
+        # Keep unknowns inside their priors (reflect at the bounds).
+        base = x.shape[1] - len(self.unknowns)
+        for j, u in enumerate(self.unknowns):
+            lo, hi = u.prior
+            col = x_new[:, base + j]
+            col = np.where(col < lo, 2 * lo - col, col)
+            x_new[:, base + j] = np.clip(np.where(col > hi, 2 * hi - col, col), lo, hi)
+        self.unpack(x_new, state)
+        # The POM keeps its pose; the anchors follow the jittered contacts.
+        state.anchor_to_pose(self.model)
+
+    # ---- summaries
+
+    def ci_deg(self, x: np.ndarray) -> float:
+        """Mean 95% interval width over joint angles [deg] (METHOD.md 3)."""
+        n_th = self.model.n_fingers * self.model.n_joints
+        return interval_width_deg(x[:, :n_th]) if len(x) else float("inf")
+
+    @property
+    def converged(self) -> bool:
+        return bool(self.history) and self.history[-1].ci_deg < self.config.ci_threshold_deg

@@ -1,0 +1,215 @@
+"""The self-identification loop (Algorithm 1, METHOD.md 3): grasp, observe, act, update until
+the joint-angle intervals converge or the iteration budget runs out.
+
+Backend-agnostic: the loop sees a `world` that moves tendons (`grasp()`, `apply(delta)`,
+returning the commands or an object with `.commands`, like `vlr.hand.Hand`'s ApplyReport) and
+an `observer` callable that returns the POM pose (anything with `.position` and `.rotation`,
+e.g. `vlr.perception.observe(...)`'s Observation) or None when the tag is not seen. The
+synthetic world plugs in directly (`observer=world.observe`); the sim or hardware plug in with
+`observer=lambda: perception.observe(hand.grab_frame().image, ...)`.
+
+Ground truth, if given, is used ONLY to score each iteration (errors, coverage); the filter
+never sees it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+import numpy as np
+
+from vlr.filter import FilterConfig, IterationRecord, ParticleFilter
+from vlr.kinematics import HandModel, contact_in_distal, normals_from_angles
+from vlr.motion import ObjectParams
+from vlr.observation import PoseObservation
+from vlr.synthetic import NominalGrasp, Truth, random_action
+
+__all__ = ["ActingWorld", "IdentifyConfig", "Estimate", "Score", "IdentifyResult", "identify"]
+
+
+class ActingWorld(Protocol):
+    """What the loop needs of a hand: close on the object, and change tendon commands."""
+
+    def grasp(self) -> Any: ...
+
+    def apply(self, delta: np.ndarray) -> Any: ...
+
+
+@dataclass(frozen=True)
+class IdentifyConfig:
+    """Loop settings.
+
+    Attributes:
+        max_iterations: actions after the first observation.
+        min_iterations: do not stop on convergence before this many actions.
+        action_range: exploratory tendon-change magnitude range [m] (random sign).
+        stop_on_convergence: stop once the 95% interval criterion holds (METHOD.md 3).
+        filter: particle-filter settings.
+        action_seed: seed of the action Generator (None: the filter's seed + 1).
+    """
+
+    max_iterations: int = 40
+    min_iterations: int = 0
+    action_range: tuple[float, float] = (0.2e-3, 0.4e-3)
+    stop_on_convergence: bool = True
+    filter: FilterConfig = field(default_factory=FilterConfig)
+    action_seed: int | None = None
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """Posterior mean and 95% interval of one quantity."""
+
+    mean: float
+    low: float
+    high: float
+
+
+@dataclass(frozen=True)
+class Score:
+    """Errors against ground truth at one iteration (scoring only)."""
+
+    theta_error_deg: np.ndarray
+    theta_covered: np.ndarray
+    unknown_error: dict[str, float]
+    unknown_covered: dict[str, bool]
+
+
+@dataclass
+class IdentifyResult:
+    """Outcome of `identify`.
+
+    Attributes:
+        converged: the interval criterion held at the end.
+        iterations: actions taken; converged_at: first iteration meeting it (or None).
+        theta: {"finger.k": Estimate} joint angles [rad].
+        contacts: (N, 3) mean contact points in each distal frame [m].
+        distal_virtual_length: {finger: Estimate} distal joint to contact [m] (Eq. 2).
+        unknowns: {spec: Estimate} identified parameters (SI units).
+        history: one IterationRecord per filter update.
+        scores: per-iteration Score when ground truth was given (else empty).
+        seconds: wall time of the filter updates per iteration.
+    """
+
+    converged: bool
+    iterations: int
+    converged_at: int | None
+    theta: dict[str, Estimate]
+    contacts: np.ndarray
+    distal_virtual_length: dict[str, Estimate]
+    unknowns: dict[str, Estimate]
+    history: list[IterationRecord]
+    scores: list[Score]
+    seconds: list[float]
+
+
+def _commands(report: Any) -> np.ndarray:
+    return np.asarray(getattr(report, "commands", report), dtype=float)
+
+
+def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
+    post = rec.posterior or rec.prior
+    n_th = pf.model.n_fingers * pf.model.n_joints
+    t = truth.theta.ravel()
+    err = np.degrees(np.abs(post.mean[:n_th] - t))
+    cov = (post.low[:n_th] <= t) & (t <= post.high[:n_th])
+    base = len(post.mean) - len(pf.unknowns)
+    ue, uc = {}, {}
+    for j, u in enumerate(pf.unknowns):
+        if u.kind == "stiffness":
+            true = truth.stiffness[u.finger, u.joint]
+        elif u.kind == "length":
+            true = truth.segments[u.finger, u.joint]
+        else:
+            true = truth.tendon[max(u.finger, 0)]
+        ue[u.spec] = float(post.mean[base + j] - true)
+        uc[u.spec] = bool(post.low[base + j] <= true <= post.high[base + j])
+    return Score(err, cov, ue, uc)
+
+
+def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
+             model: HandModel, obj: ObjectParams, nominal: NominalGrasp,
+             config: IdentifyConfig | None = None,
+             truth: Callable[[], Truth] | None = None,
+             progress: Callable[[IterationRecord], None] | None = None) -> IdentifyResult:
+    """Run Algorithm 1: grasp -> observe -> (act -> observe -> update)* until converged.
+
+    Args:
+        world: moves the tendons (`ActingWorld`).
+        observer: returns the current POM pose, or None if not seen.
+        model: the NOMINAL hand (what the user believes).
+        obj: object mass and centre of mass.
+        nominal: nominal grasp guess (angles, contacts) for the prior; its command is not used
+            (the world's grasp() reports u_0).
+        config: loop settings.
+        truth: ground truth callable for SCORING ONLY.
+        progress: called with each IterationRecord (e.g. a progress bar).
+    """
+    cfg = config or IdentifyConfig()
+    pf = ParticleFilter(model, obj, cfg.filter)
+    action_rng = np.random.default_rng(cfg.filter.seed + 1 if cfg.action_seed is None
+                                       else cfg.action_seed)
+    u = _commands(world.grasp())
+    obs = observer()
+    while obs is None:  # the filter needs one pose to anchor its particles
+        obs = observer()
+    scores: list[Score] = []
+    seconds: list[float] = []
+    t0 = time.perf_counter()
+    rec = pf.initialize(obs, u, nominal.theta, nominal.contact)
+    seconds.append(time.perf_counter() - t0)
+    converged_at = None
+
+    def after(rec: IterationRecord) -> None:
+        if truth is not None:
+            scores.append(_score(pf, rec, truth()))
+        if progress is not None:
+            progress(rec)
+
+    after(rec)
+    it = 0
+    while it < cfg.max_iterations:
+        if pf.converged and converged_at is None:
+            converged_at = it
+        if pf.converged and cfg.stop_on_convergence and it >= cfg.min_iterations:
+            break
+        it += 1
+        delta = random_action(action_rng, model.n_fingers, cfg.action_range)
+        u = _commands(world.apply(delta))
+        obs = observer()
+        t0 = time.perf_counter()
+        rec = pf.step(u, obs)
+        seconds.append(time.perf_counter() - t0)
+        after(rec)
+    if pf.converged and converged_at is None:
+        converged_at = it
+    return _result(pf, it, converged_at, scores, seconds)
+
+
+def _result(pf: ParticleFilter, iterations: int, converged_at: int | None,
+            scores: list[Score], seconds: list[float]) -> IdentifyResult:
+    m = pf.model
+    x = pf.pack(pf.state)
+    q = np.quantile(x, [0.025, 0.975], axis=0)
+    mean = x.mean(axis=0)
+    names = pf.dim_names
+    est = {n: Estimate(float(mean[j]), float(q[0, j]), float(q[1, j]))
+           for j, n in enumerate(names)}
+    n_th = m.n_fingers * m.n_joints
+    theta = {f"{f}.{k}": est[f"theta:{f}.{k}"] for f in m.names for k in range(m.n_joints)}
+    ab = mean[n_th:n_th + 2 * m.n_fingers].reshape(m.n_fingers, 2)
+    contacts = contact_in_distal(m, normals_from_angles(ab[:, 0], ab[:, 1]),
+                                 pf.state.segments.mean(axis=0))
+    c_all = contact_in_distal(m, pf.state.normals, pf.state.segments)
+    lengths = np.linalg.norm(c_all[..., 1:], axis=-1)
+    ql = np.quantile(lengths, [0.025, 0.975], axis=0)
+    dvl = {f: Estimate(float(lengths[:, i].mean()), float(ql[0, i]), float(ql[1, i]))
+           for i, f in enumerate(m.names)}
+    unknowns = {u.spec: est[u.spec] for u in pf.unknowns}
+    return IdentifyResult(converged=pf.converged, iterations=iterations,
+                          converged_at=converged_at, theta=theta, contacts=contacts,
+                          distal_virtual_length=dvl, unknowns=unknowns, history=pf.history,
+                          scores=scores, seconds=seconds)

@@ -1,0 +1,334 @@
+"""Motion model Gamma (Eq. 4) by energy minimisation (Eq. 6-9), batched over particles.
+
+Formulation (METHOD.md 8.1-8.2; the choice is ours):
+
+* State of one particle: physical joint angles theta (N, K); each finger's contact point fixed
+  in its distal frame D, on the pad sphere (pad_center + pad_radius * n); the contact points'
+  locations in the object frame O ("anchors"), which pin the POM rigidly to the contact set
+  (Eq. 1, 8); and the object pose (p, R) = the POM pose in the palm frame.
+* Unknowns of the solve: theta and the object pose (6 dof). Eq. 8 (rigid grasp, fixed
+  contacts) is a stiff penalty 1/2 k_c |FK contact_i(theta) - (p + R a_i)|^2 rather than a
+  hard constraint: the side fingers move only in their planes, so hard contact equalities are
+  rank-deficient (METHOD.md 8.2), while a penalty with damped Newton is not troubled by it.
+* Energy (Eq. 9's objective, compliant form): springs 1/2 k (theta - rest)^2 (Eq. 6); series
+  tendon 1/2 k_t max(0, u - s(theta))^2 with s = sum r_k (theta_k - lo_k) (Eq. 7 with
+  compliance); joint limits as stiff one-sided penalties; gravity potential of the object and
+  of the finger links under a configurable gravity vector in the palm frame.
+* Solver: per-particle Levenberg-Marquardt on the exact Hessian (arrow structure, Schur
+  complement), warm-started from the particle's previous configuration, with a step limit.
+  A particle whose solve fails (non-finite, no convergence, or a jump larger than an action
+  can cause) is flagged in `status`; the filter gives it zero weight.
+
+Energy terms are named in `MotionConfig.terms`; each has a numba kernel in
+`vlr._energy_kernels` and a NumPy reference here (`reference_energy`), used by the tests.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+
+import numpy as np
+
+from vlr import _energy_kernels as kern
+from vlr.kinematics import HandModel, contact_in_distal, contact_points, plane_rotation
+from vlr.spec import ObjectSpec
+
+__all__ = [
+    "TERMS",
+    "STATUS",
+    "MotionConfig",
+    "ObjectParams",
+    "ParticleState",
+    "MotionModel",
+    "rotvec_to_matrix",
+    "reference_energy",
+    "contacts_in_distal",
+]
+
+# Energy terms by name -> kernel code. "contacts" is Eq. 8 (rigid grasp) as a penalty.
+TERMS: dict[str, int] = {
+    "springs": kern.SPRINGS,
+    "tendon": kern.TENDON,
+    "limits": kern.LIMITS,
+    "link_gravity": kern.LINK_GRAVITY,
+    "object_gravity": kern.OBJECT_GRAVITY,
+    "contacts": kern.CONTACTS,
+}
+
+STATUS = {kern.OK: "ok", kern.NONFINITE: "non-finite", kern.NO_CONVERGENCE: "no convergence",
+          kern.JUMP: "jump", kern.INACTIVE: "inactive"}
+
+
+@dataclass(frozen=True)
+class MotionConfig:
+    """Settings of the motion model (units in brackets).
+
+    Attributes:
+        terms: energy terms to include (keys of `TERMS`).
+        contact_stiffness: penalty k_c tying contacts to anchors [N/m]. 1e6 N/m leaves
+            10 um of penetration at 10 N; METHOD.md 8.2 used 1e7 (1e4 N/mm), which this
+            solver also handles, with more rejected line-search trials.
+        limit_stiffness: one-sided joint-limit penalty [N m/rad]; 100 lets a spring preload
+            of ~0.02 N m sink 0.01 degree into a stop.
+        gravity: gravity vector in the palm frame [m/s^2]; default palm up.
+        max_iter: Newton iterations (including rejected LM trials) per solve.
+        tol_theta: convergence: largest angle step [rad] (also used for the rotation step).
+        tol_pos: convergence: object position step [m].
+        max_step_theta: step limit per Newton iteration [rad].
+        max_step_pos: step limit per Newton iteration [m].
+        jump_theta: a solve that moves any joint more than this is another branch [rad].
+        jump_pos: ... or moves the POM more than this [m].
+        mu0: initial Levenberg-Marquardt damping (relative to the Hessian diagonal).
+    """
+
+    terms: tuple[str, ...] = ("springs", "tendon", "limits", "link_gravity",
+                              "object_gravity", "contacts")
+    contact_stiffness: float = 1e6
+    limit_stiffness: float = 100.0
+    gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
+    max_iter: int = 30
+    tol_theta: float = 1e-8
+    tol_pos: float = 1e-9
+    max_step_theta: float = 0.1
+    max_step_pos: float = 0.005
+    jump_theta: float = 0.25
+    jump_pos: float = 0.01
+    mu0: float = 1e-6
+
+    def __post_init__(self) -> None:
+        unknown = set(self.terms) - set(TERMS)
+        if unknown:
+            raise ValueError(f"unknown energy terms {sorted(unknown)}; known: {sorted(TERMS)}")
+
+    def flags(self) -> np.ndarray:
+        out = np.zeros(kern.N_TERMS, dtype=np.int64)
+        for t in self.terms:
+            out[TERMS[t]] = 1
+        return out
+
+    def params(self) -> np.ndarray:
+        prm = np.zeros(kern.N_PRM)
+        prm[kern.P_KC] = self.contact_stiffness
+        prm[kern.P_KLIM] = self.limit_stiffness
+        prm[kern.P_TOL_TH] = self.tol_theta
+        prm[kern.P_TOL_P] = self.tol_pos
+        prm[kern.P_MAX_DTH] = self.max_step_theta
+        prm[kern.P_MAX_DP] = self.max_step_pos
+        prm[kern.P_JUMP_TH] = self.jump_theta
+        prm[kern.P_JUMP_P] = self.jump_pos
+        prm[kern.P_MU0] = self.mu0
+        return prm
+
+
+@dataclass(frozen=True)
+class ObjectParams:
+    """What the motion model needs of the object: mass [kg] and centre of mass in O [m]."""
+
+    mass: float
+    com: tuple[float, float, float]
+
+    @classmethod
+    def from_spec(cls, spec: ObjectSpec) -> ObjectParams:
+        return cls(mass=float(spec.mass), com=tuple(float(c) for c in spec.com))
+
+
+@dataclass
+class ParticleState:
+    """Particles as stacked arrays (P particles, N fingers, K joints).
+
+    Attributes:
+        theta: (P, N, K) physical joint angles [rad].
+        normals: (P, N, 3) unit pad normals in D: the contact point on the pad.
+        anchors: (P, N, 3) contact points in the object frame O [m] (the POM's anchor).
+        pos: (P, 3) POM position in the palm frame [m].
+        rot: (P, 3, 3) POM rotation R_PO.
+        segments: (P, N, K) link lengths, last entry the pad centre's z_D [m]
+            (`vlr.kinematics`).
+        stiffness: (P, N, K) joint spring rates [N m/rad].
+        tendon: (P, N) series tendon stiffness [N/m].
+        valid: (P,) False once a solve failed: zero weight.
+    """
+
+    theta: np.ndarray
+    normals: np.ndarray
+    anchors: np.ndarray
+    pos: np.ndarray
+    rot: np.ndarray
+    segments: np.ndarray
+    stiffness: np.ndarray
+    tendon: np.ndarray
+    valid: np.ndarray
+
+    @property
+    def n(self) -> int:
+        return self.theta.shape[0]
+
+    def take(self, idx: np.ndarray) -> ParticleState:
+        """A new state of the particles `idx` (resampling), arrays copied and contiguous."""
+        return ParticleState(**{f.name: np.ascontiguousarray(getattr(self, f.name)[idx])
+                                for f in fields(self)})
+
+    def copy(self) -> ParticleState:
+        return ParticleState(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
+
+    @classmethod
+    def nominal(cls, model: HandModel, n: int, theta: np.ndarray, normals: np.ndarray,
+                pos: np.ndarray, rot: np.ndarray) -> ParticleState:
+        """n particles with the model's nominal parameters at the given configuration; the
+        anchors follow from the contacts and the POM pose (see `anchor_to_pose`)."""
+        nf, nk = model.n_fingers, model.n_joints
+        st = cls(theta=np.broadcast_to(theta, (n, nf, nk)).astype(float).copy(),
+                 normals=np.broadcast_to(normals, (n, nf, 3)).astype(float).copy(),
+                 anchors=np.zeros((n, nf, 3)),
+                 pos=np.broadcast_to(pos, (n, 3)).astype(float).copy(),
+                 rot=np.broadcast_to(rot, (n, 3, 3)).astype(float).copy(),
+                 segments=np.broadcast_to(model.segments, (n, nf, nk)).copy(),
+                 stiffness=np.broadcast_to(model.stiffness, (n, nf, nk)).copy(),
+                 tendon=np.full((n, nf), model.tendon_stiffness),
+                 valid=np.ones(n, dtype=bool))
+        st.anchor_to_pose(model)
+        return st
+
+    def contacts(self, model: HandModel) -> np.ndarray:
+        """(P, N, 3) contact points in the palm frame by forward kinematics (Eq. 2)."""
+        return contact_points(model, self.theta, self.normals, self.segments)
+
+    def anchor_to_pose(self, model: HandModel) -> None:
+        """Re-derive the anchors so that the current POM pose (pos, rot) matches the current
+        contacts: a_i = R^T (p_i - p). Used at initialisation and after jitter, so that a
+        jittered particle predicts the POM it had before (METHOD.md 8.2: a fixed anchor
+        biased the estimates by 3-5 degrees)."""
+        c = self.contacts(model)
+        self.anchors = np.ascontiguousarray(
+            np.einsum("pji,pnj->pni", self.rot, c - self.pos[:, None, :]))
+
+
+def rotvec_to_matrix(w: np.ndarray) -> np.ndarray:
+    """Rodrigues: rotation vector (..., 3) -> rotation matrix (..., 3, 3)."""
+    w = np.asarray(w, dtype=float)
+    ang = np.linalg.norm(w, axis=-1)[..., None, None]
+    k = np.zeros(w.shape[:-1] + (3, 3))
+    k[..., 0, 1], k[..., 0, 2], k[..., 1, 2] = -w[..., 2], w[..., 1], -w[..., 0]
+    k = k - np.swapaxes(k, -1, -2)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        a = np.where(ang > 1e-12, np.sin(ang) / ang, 1.0)
+        b = np.where(ang > 1e-12, (1 - np.cos(ang)) / ang**2, 0.5)
+    return np.eye(3) + a * k + b * (k @ k)
+
+
+class MotionModel:
+    """Gamma: (state, u) -> equilibrium state (Eq. 4, 9), batched over particles."""
+
+    def __init__(self, model: HandModel, obj: ObjectParams,
+                 config: MotionConfig | None = None) -> None:
+        self.model = model
+        self.obj = obj
+        self.config = config or MotionConfig()
+        lim = model.limits
+        self._shared = (
+            np.ascontiguousarray(model.base_pos), np.ascontiguousarray(model.base_rot),
+            np.ascontiguousarray(model.radii), np.ascontiguousarray(model.rest),
+            np.ascontiguousarray(lim[..., 0]), np.ascontiguousarray(lim[..., 1]),
+            np.ascontiguousarray(model.link_masses), np.ascontiguousarray(model.link_coms),
+            np.ascontiguousarray(model.pad_center[:, :2]),
+            np.ascontiguousarray(model.pad_radius),
+            float(obj.mass), np.asarray(obj.com, dtype=float),
+            np.asarray(self.config.gravity, dtype=float))
+        self._flags = self.config.flags()
+        self._prm = self.config.params()
+
+    def solve(self, state: ParticleState, u: np.ndarray,
+              config: MotionConfig | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """Move every valid particle to its equilibrium at tendon commands `u` (Eq. 9).
+
+        Warm-starts from each particle's current configuration and updates theta, pos, rot
+        in place; particles whose solve fails are marked invalid (state.valid = False).
+
+        Args:
+            state: particles; arrays must be C-contiguous float64.
+            u: (N,) tendon commands [m].
+            config: optional override (e.g. looser jump limits for the initial projection).
+        Returns:
+            status (P,) int8 codes (`STATUS`), iterations (P,) int32.
+        """
+        cfg = config or self.config
+        prm = cfg.params() if config is not None else self._prm
+        flags = cfg.flags() if config is not None else self._flags
+        u = np.ascontiguousarray(u, dtype=float).reshape(self.model.n_fingers)
+        status = np.empty(state.n, dtype=np.int8)
+        iters = np.empty(state.n, dtype=np.int32)
+        kern.solve_batch(state.theta, state.segments, state.normals, state.anchors,
+                         state.pos, state.rot, state.stiffness, state.tendon, u,
+                         *self._shared, flags, prm, int(cfg.max_iter), state.valid,
+                         status, iters)
+        state.valid &= status == kern.OK
+        return status, iters
+
+    def evaluate(self, state: ParticleState, q: int,
+                 u: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+        """Energy [J], gradient (N K + 6,) and dense Hessian of particle q, in the solver's
+        coordinates (theta, dp, dw). For tests and diagnostics."""
+        nf, nk = self.model.n_fingers, self.model.n_joints
+        gA, gC = np.empty((nf, nk)), np.empty(6)
+        A, B, C = np.empty((nf, nk, nk)), np.empty((nf, nk, 6)), np.empty((6, 6))
+        e = kern.evaluate_one(state.theta[q], state.segments[q], state.normals[q],
+                              state.anchors[q], state.pos[q], state.rot[q],
+                              state.stiffness[q], state.tendon[q],
+                              np.asarray(u, dtype=float), *self._shared, self._flags,
+                              self._prm, gA, gC, A, B, C)
+        n = nf * nk
+        H = np.zeros((n + 6, n + 6))
+        for i in range(nf):
+            sl = slice(i * nk, (i + 1) * nk)
+            H[sl, sl] = A[i]
+            H[sl, n:] = B[i]
+            H[n:, sl] = B[i].T
+        H[n:, n:] = C
+        return float(e), np.concatenate([gA.ravel(), gC]), H
+
+    def tensions(self, state: ParticleState, u: np.ndarray) -> np.ndarray:
+        """Tendon tensions k_t max(0, u - s(theta)) [N], (P, N) (Eq. 7, compliant)."""
+        s = self.model.tendon_takeup(state.theta)
+        return state.tendon * np.maximum(0.0, np.asarray(u) - s)
+
+
+def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.ndarray,
+                     theta: np.ndarray, pos: np.ndarray, rot: np.ndarray) -> float:
+    """Plain NumPy energy of particle q at configuration (theta, pos, rot), term by term
+    (Eq. 6, 7 compliant, 8 penalty, limits, gravity). The independent reference the
+    vectorised kernel is tested against."""
+    m, cfg, obj = motion.model, motion.config, motion.obj
+    g = np.asarray(cfg.gravity, dtype=float)
+    theta = np.asarray(theta, dtype=float)
+    lim = m.limits
+    e = 0.0
+    if "springs" in cfg.terms:
+        e += 0.5 * np.sum(state.stiffness[q] * (theta - m.rest) ** 2)
+    if "limits" in cfg.terms:
+        over = np.maximum(0.0, lim[..., 0] - theta) + np.maximum(0.0, theta - lim[..., 1])
+        e += 0.5 * cfg.limit_stiffness * np.sum(over**2)
+    if "tendon" in cfg.terms:
+        slack = np.maximum(0.0, np.asarray(u) - m.tendon_takeup(theta))
+        e += 0.5 * np.sum(state.tendon[q] * slack**2)
+    if "link_gravity" in cfg.terms:
+        seg = state.segments[q]
+        phi = np.cumsum(theta, axis=-1)
+        q_f = np.zeros(theta.shape + (3,))
+        for k in range(1, m.n_joints):
+            q_f[:, k, 1] = q_f[:, k - 1, 1] + seg[:, k - 1] * np.sin(phi[:, k - 1])
+            q_f[:, k, 2] = q_f[:, k - 1, 2] + seg[:, k - 1] * np.cos(phi[:, k - 1])
+        com_f = q_f + np.einsum("nkab,nkb->nka", plane_rotation(phi), m.link_coms)
+        com_p = m.base_pos[:, None, :] + np.einsum("nab,nkb->nka", m.base_rot, com_f)
+        e -= np.sum(m.link_masses * (com_p @ g))
+    if "object_gravity" in cfg.terms:
+        e -= obj.mass * g @ (pos + rot @ np.asarray(obj.com))
+    if "contacts" in cfg.terms:
+        c = contact_points(m, theta, state.normals[q], state.segments[q])
+        target = pos + state.anchors[q] @ rot.T
+        e += 0.5 * cfg.contact_stiffness * np.sum((c - target) ** 2)
+    return float(e)
+
+
+def contacts_in_distal(motion: MotionModel, state: ParticleState) -> np.ndarray:
+    """(P, N, 3) contact points in each finger's distal frame D [m]."""
+    return contact_in_distal(motion.model, state.normals, state.segments)

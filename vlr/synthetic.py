@@ -1,0 +1,189 @@
+"""A model-consistent synthetic world for identification (METHOD.md 8.1: "on data that
+follows the model" the filter must converge).
+
+The world IS the motion model (Eq. 6-9) with one particle, the truth, whose parameters may
+differ from the nominal hand (a replaced spring, a replacement finger). It moves tendons like a
+`Hand` (`grasp`, `apply`, `commands`) and returns observations directly: its POM pose plus
+Gaussian noise (0.05 mm, 0.2 degree, the camera's accuracy in METHOD.md 8.2), since the sim
+camera is not part of this world. Ground truth is available through `truth()` for scoring
+only.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from vlr.kinematics import HandModel, normals_from_angles
+from vlr.motion import MotionConfig, MotionModel, ObjectParams, ParticleState, rotvec_to_matrix
+from vlr.observation import PomObservation
+
+__all__ = ["SyntheticConfig", "NominalGrasp", "Truth", "SyntheticWorld", "nominal_grasp",
+           "random_action"]
+
+
+@dataclass(frozen=True)
+class SyntheticConfig:
+    """Settings of the synthetic world (units in brackets).
+
+    Attributes:
+        seed: seed of the world's own Generator (truth offsets and observation noise).
+        noise_pos: observation noise std per axis [m].
+        noise_rot: observation rotation noise std per axis [rad].
+        grasp_theta: (K,) joint angles of the nominal grasp guess, every finger [rad]; the
+            default (-0.3, 1.2) puts the Model O pads on a ~36 mm wide object.
+        grasp_contact: (alpha, beta) of the nominal pad contact [rad].
+        pom_depth: POM (tag) below the contacts' centroid [m].
+        grasp_tension: tendon tension at the grasp command u_0 [N].
+        theta_offset: std of the truth's joint-angle offset from the nominal guess [rad].
+        contact_offset: std of the truth's contact-angle offset [rad].
+        motion: motion-model settings of the world.
+    """
+
+    seed: int = 0
+    noise_pos: float = 0.05e-3
+    noise_rot: float = float(np.radians(0.2))
+    grasp_theta: tuple[float, ...] = (-0.3, 1.2)
+    grasp_contact: tuple[float, float] = (0.0, 0.0)
+    pom_depth: float = 0.03
+    grasp_tension: float = 5.0
+    theta_offset: float = float(np.radians(1.5))
+    contact_offset: float = 0.08
+    motion: MotionConfig = MotionConfig()
+
+
+@dataclass(frozen=True)
+class NominalGrasp:
+    """The user's nominal guess of the grasp: joint angles (N, K) [rad], contact angles (N, 2)
+    [rad], and the grasp command u_0 (N,) [m]."""
+
+    theta: np.ndarray
+    contact: np.ndarray
+    command: np.ndarray
+
+
+@dataclass(frozen=True)
+class Truth:
+    """Ground truth of the synthetic world, for scoring only (never for the filter)."""
+
+    theta: np.ndarray
+    contact: np.ndarray
+    normals: np.ndarray
+    segments: np.ndarray
+    stiffness: np.ndarray
+    tendon: np.ndarray
+    position: np.ndarray
+    rotation: np.ndarray
+
+
+def nominal_grasp(model: HandModel, config: SyntheticConfig) -> NominalGrasp:
+    """Nominal grasp guess from the hand's nominal geometry: every finger at
+    `config.grasp_theta`, contacts at `grasp_contact`, command u_0 = s(theta) + T / k_t
+    (Eq. 7, compliant)."""
+    nf = model.n_fingers
+    theta = np.tile(np.asarray(config.grasp_theta, dtype=float), (nf, 1))
+    contact = np.tile(np.asarray(config.grasp_contact, dtype=float), (nf, 1))
+    u0 = model.tendon_takeup(theta) + config.grasp_tension / model.tendon_stiffness
+    return NominalGrasp(theta, contact, u0)
+
+
+def random_action(rng: np.random.Generator, n_fingers: int,
+                  magnitude: tuple[float, float] = (0.2e-3, 0.4e-3)) -> np.ndarray:
+    """Exploratory action (METHOD.md 3, 8.1): per finger a tendon change of random sign and a
+    magnitude uniform in `magnitude` [m] (0.2-0.4 mm: 4-8 N at 20 N/mm)."""
+    mag = rng.uniform(magnitude[0], magnitude[1], n_fingers)
+    return mag * rng.choice([-1.0, 1.0], n_fingers)
+
+
+class SyntheticWorld:
+    """The truth as one motion-model particle (module docstring).
+
+    Args:
+        true_model: the real hand (may differ from the nominal: `vlr.spec.with_finger`).
+        obj: object mass and centre of mass.
+        config: world settings.
+        nominal_model: the hand the user believes in (for the nominal grasp guess); defaults
+            to `true_model`.
+        stiffness_overrides: {(finger, joint): k} true spring rates differing from the spec.
+        tendon_stiffness: true series tendon stiffness [N/m] (default: the spec's).
+    """
+
+    def __init__(self, true_model: HandModel, obj: ObjectParams,
+                 config: SyntheticConfig | None = None,
+                 nominal_model: HandModel | None = None,
+                 stiffness_overrides: dict[tuple[int, int], float] | None = None,
+                 tendon_stiffness: float | None = None) -> None:
+        self.config = config or SyntheticConfig()
+        self.model = true_model
+        self.nominal_model = nominal_model or true_model
+        self.motion = MotionModel(true_model, obj, self.config.motion)
+        self.rng = np.random.default_rng(self.config.seed)
+        self._stiffness_overrides = dict(stiffness_overrides or {})
+        self._tendon = tendon_stiffness
+        self.nominal = nominal_grasp(self.nominal_model, self.config)
+        self.state: ParticleState | None = None
+        self._commands = np.zeros(true_model.n_fingers)
+
+    @property
+    def commands(self) -> np.ndarray:
+        return self._commands.copy()
+
+    def grasp(self) -> np.ndarray:
+        """Place the truth near the nominal grasp (random offsets) and settle at u_0.
+
+        Returns the commands u_0 (N,) [m]."""
+        cfg, m, rng = self.config, self.model, self.rng
+        nf = m.n_fingers
+        theta = self.nominal.theta + rng.normal(0.0, cfg.theta_offset, self.nominal.theta.shape)
+        ab = self.nominal.contact + rng.normal(0.0, cfg.contact_offset, (nf, 2))
+        normals = normals_from_angles(ab[:, 0], ab[:, 1])
+        st = ParticleState.nominal(m, 1, theta, normals, np.zeros(3), np.eye(3))
+        for (i, k), v in self._stiffness_overrides.items():
+            st.stiffness[:, i, k] = v
+        if self._tendon is not None:
+            st.tendon[:] = self._tendon
+        c = st.contacts(m)[0]
+        st.pos[0] = c.mean(axis=0) - np.array([0.0, 0.0, cfg.pom_depth])
+        st.rot[0] = rotvec_to_matrix(rng.normal(0.0, 0.05, 3))
+        st.anchor_to_pose(m)
+        self._commands = self.nominal.command.copy()
+        settle = replace(cfg.motion, max_iter=500, jump_theta=np.pi, jump_pos=1.0)
+        status, _ = self.motion.solve(st, self._commands, settle)
+        if status[0] != 0:
+            raise RuntimeError(f"synthetic grasp did not settle (status {status[0]})")
+        self.state = st
+        return self.commands
+
+    def apply(self, delta: np.ndarray) -> np.ndarray:
+        """Change the tendon commands by `delta` (N,) [m] and settle; returns the commands."""
+        if self.state is None:
+            raise RuntimeError("grasp() first")
+        new = self._commands + np.asarray(delta, dtype=float)
+        trial = self.state.copy()
+        # The world is not limited to small moves: only a failed solve loses the grasp.
+        cfg = replace(self.config.motion, max_iter=300, jump_theta=np.pi, jump_pos=1.0)
+        status, _ = self.motion.solve(trial, new, cfg)
+        if status[0] != 0:
+            raise RuntimeError(f"synthetic world lost the grasp (status {status[0]})")
+        self.state = trial
+        self._commands = new
+        return self.commands
+
+    def observe(self) -> PomObservation:
+        """The POM pose plus Gaussian noise (METHOD.md 8.2 camera accuracy)."""
+        cfg = self.config
+        pos = self.state.pos[0] + self.rng.normal(0.0, cfg.noise_pos, 3)
+        rot = self.state.rot[0] @ rotvec_to_matrix(self.rng.normal(0.0, cfg.noise_rot, 3))
+        return PomObservation(position=pos, rotation=rot)
+
+    def truth(self) -> Truth:
+        """Ground truth, for scoring only."""
+        from vlr.kinematics import angles_from_normals
+
+        st = self.state
+        a, b = angles_from_normals(st.normals[0])
+        return Truth(theta=st.theta[0].copy(), contact=np.stack([a, b], -1),
+                     normals=st.normals[0].copy(), segments=st.segments[0].copy(),
+                     stiffness=st.stiffness[0].copy(), tendon=st.tendon[0].copy(),
+                     position=st.pos[0].copy(), rotation=st.rot[0].copy())
