@@ -15,6 +15,7 @@ sampled (METHOD.md 3).
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -285,6 +286,9 @@ class ParticleFilter:
         self.history: list[IterationRecord] = []
         self.iteration = 0
         self.command: np.ndarray | None = None
+        # Seconds per phase of the last iteration (motion, observation, weights, resampling,
+        # jitter, summary), for `vlr bench`.
+        self.timings: dict[str, float] = {}
 
     # ---- packing of the sampled dimensions
 
@@ -345,7 +349,9 @@ class ParticleFilter:
         self.command = np.asarray(command, dtype=float).copy()
         init_cfg = replace(cfg.motion, jump_theta=cfg.init_jump_theta, jump_pos=0.05,
                            max_iter=max(cfg.motion.max_iter, 100))
+        t0 = time.perf_counter()
         status, _ = self.motion.solve(state, self.command, init_cfg)
+        self.timings = {"motion": time.perf_counter() - t0}
         self.init_status = np.bincount(status, minlength=5)
         return self._update(observation)
 
@@ -357,30 +363,44 @@ class ParticleFilter:
             raise RuntimeError("initialize() first")
         self.command = np.asarray(command, dtype=float).copy()
         self.iteration += 1
+        t0 = time.perf_counter()
         self.motion.solve(self.state, self.command)
+        self.timings = {"motion": time.perf_counter() - t0}
         return self._update(observation)
 
     def _update(self, observation: PoseObservation | None) -> IterationRecord:
-        cfg, state = self.config, self.state
+        cfg, state, tm = self.config, self.state, self.timings
+        t = time.perf_counter()
         x = self.pack(state)
         prior = Summary.of(x[state.valid]) if state.valid.any() else Summary.of(x)
         n_invalid = int((~state.valid).sum())
+        tm["summary"] = time.perf_counter() - t
         if observation is None:
             rec = IterationRecord(self.iteration, self.command, prior, None, float("nan"),
                                   float("nan"), n_invalid, self.ci_deg(x[state.valid]))
             self.history.append(rec)
             return rec
         # Eq. 5 likelihood, tempered (METHOD.md 8.2).
+        t = time.perf_counter()
         log_lik = self.obs_model.log_likelihood(state, observation)
+        tm["observation"] = time.perf_counter() - t
+        t = time.perf_counter()
         w, beta = temper(log_lik, cfg.ess_fraction)
         ess = effective_sample_size(w)
+        tm["weights"] = time.perf_counter() - t
         # Resample (systematic), then jitter.
+        t = time.perf_counter()
         idx = systematic_resample(w, self.rng)
         self.state = state = state.take(idx)
         x = x[idx]
+        tm["resampling"] = time.perf_counter() - t
+        t = time.perf_counter()
         posterior = Summary.of(x)
         ci = self.ci_deg(x)
+        tm["summary"] += time.perf_counter() - t
+        t = time.perf_counter()
         self._jitter(x)
+        tm["jitter"] = time.perf_counter() - t
         rec = IterationRecord(self.iteration, self.command, prior, posterior, ess, beta,
                               n_invalid, ci)
         self.history.append(rec)

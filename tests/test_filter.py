@@ -1,0 +1,103 @@
+"""Particle filter pieces (Algorithm 1): resampler, tempering, ESS, seeding."""
+
+import numpy as np
+import pytest
+from filterpy.monte_carlo import resampling as fp_resampling
+
+from vlr.filter import (
+    FilterConfig,
+    ParticleFilter,
+    effective_sample_size,
+    interval_width_deg,
+    parse_unknown,
+    systematic_resample,
+    temper,
+)
+from vlr.kinematics import HandModel
+from vlr.motion import ObjectParams
+from vlr.spec import load_hand
+from vlr.synthetic import SyntheticConfig, SyntheticWorld, random_action
+
+OBJ = ObjectParams(mass=0.12, com=(0.0, 0.0, 0.03))
+
+
+@pytest.fixture(scope="module")
+def modelo() -> HandModel:
+    return HandModel.from_spec(load_hand("modelo"))
+
+
+@pytest.mark.parametrize("offset", [0.0, 0.37, 0.999999])
+def test_resampler_agrees_with_filterpy(monkeypatch, offset):
+    rng = np.random.default_rng(3)
+    w = rng.random(500)
+    w /= w.sum()
+    monkeypatch.setattr(fp_resampling, "random", lambda: offset)
+    expected = fp_resampling.systematic_resample(w)
+    np.testing.assert_array_equal(systematic_resample(w, offset=offset), expected)
+
+
+def test_resampler_never_indexes_past_the_end(monkeypatch):
+    w = np.full(1000, 1.0 / 1000) * (1 - 1e-9)  # cumulative sum ends below 1
+    idx = systematic_resample(w, offset=0.9999999999)
+    assert idx.shape == (1000,) and idx.max() == 999
+    monkeypatch.setattr(fp_resampling, "random", lambda: 0.9999999999)
+    with pytest.raises(IndexError):  # the bug the guard removes
+        fp_resampling.systematic_resample(w)
+    w = np.zeros(10)
+    w[3] = 1.0
+    assert np.all(systematic_resample(w, np.random.default_rng(0)) == 3)
+
+
+def test_tempering_keeps_ess():
+    ll = -0.5 * (np.linspace(0, 40, 1000) ** 2)
+    w, beta = temper(ll, 0.5)
+    assert 0 < beta < 1
+    assert effective_sample_size(w) >= 0.5 * 1000 * 0.999
+    ll[::2] = -np.inf
+    w, _ = temper(ll, 0.3)
+    assert np.all(w[::2] == 0) and np.all(np.isfinite(w))
+
+
+def test_interval_width():
+    x = np.random.default_rng(0).normal(0, np.radians(1), (20000, 6))
+    assert interval_width_deg(x) == pytest.approx(2 * 1.96, rel=0.05)
+
+
+def test_parse_unknown(modelo):
+    u = parse_unknown("stiffness:thumb.distal", modelo)
+    assert (u.kind, u.finger, u.joint) == ("stiffness", 0, 1)
+    u = parse_unknown("length:left.proximal", modelo, (0.03, 0.07))
+    assert (u.kind, u.finger, u.joint, u.prior) == ("length", 1, 0, (0.03, 0.07))
+    with pytest.raises(ValueError):
+        parse_unknown("mass:thumb", modelo)
+
+
+def _run(modelo, seed, steps=2, unknowns=()):
+    world = SyntheticWorld(modelo, OBJ, SyntheticConfig(seed=1))
+    u = world.grasp()
+    pf = ParticleFilter(modelo, OBJ, FilterConfig(n_particles=300, seed=seed,
+                                                  unknowns=unknowns))
+    pf.initialize(world.observe(), u, world.nominal.theta, world.nominal.contact)
+    rng = np.random.default_rng(5)
+    for k in range(steps):
+        u = world.apply(random_action(rng, 3))
+        pf.step(u, world.observe() if k % 2 == 0 else None)
+    return pf
+
+
+def test_same_seed_same_numbers(modelo):
+    a = _run(modelo, 7, unknowns=("stiffness:thumb.distal",))
+    b = _run(modelo, 7, unknowns=("stiffness:thumb.distal",))
+    np.testing.assert_array_equal(a.pack(a.state), b.pack(b.state))
+    c = _run(modelo, 8, unknowns=("stiffness:thumb.distal",))
+    assert not np.array_equal(a.pack(a.state), c.pack(c.state))
+
+
+def test_prediction_only_step_and_records(modelo):
+    pf = _run(modelo, 1, steps=2)
+    assert len(pf.history) == 3
+    assert pf.history[2].posterior is None  # second action had no observation
+    assert pf.history[1].posterior is not None and pf.history[1].ess > 0
+    x = pf.pack(pf.state)
+    assert np.all(np.isfinite(x))
+    assert len(pf.dim_names) == x.shape[1] == 12

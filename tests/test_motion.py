@@ -1,0 +1,142 @@
+"""Motion model (Eq. 6-9): vectorised solve vs a plain reference, stationarity, observability,
+tendon slack, invalid solves."""
+
+import math
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+from vlr.kinematics import Chain, HandModel, normals_from_angles
+from vlr.motion import (
+    MotionConfig,
+    MotionModel,
+    ObjectParams,
+    ParticleState,
+    reference_energy,
+    rotvec_to_matrix,
+)
+from vlr.spec import load_hand
+
+OBJ = ObjectParams(mass=0.12, com=(0.0, 0.0, 0.03))
+THETA0 = (-0.3, 1.2)
+
+
+@pytest.fixture(scope="module")
+def modelo() -> HandModel:
+    return HandModel.from_spec(load_hand("modelo"))
+
+
+def grasp(model: HandModel, n: int = 1, tension: float = 5.0, theta=THETA0,
+          config: MotionConfig | None = None, stiffness=None):
+    """Settled grasp of n identical particles at u_0 = s(theta) + T/k_t."""
+    nf = model.n_fingers
+    th = np.tile(np.asarray(theta, dtype=float), (nf, 1))
+    normals = normals_from_angles(np.zeros(nf), np.zeros(nf))
+    st = ParticleState.nominal(model, 1, th, normals, np.zeros(3), np.eye(3))
+    if stiffness is not None:
+        st.stiffness[...] = stiffness
+    st.pos[0] = st.contacts(model)[0].mean(0) - [0.0, 0.0, 0.03]
+    st.anchor_to_pose(model)
+    u0 = model.tendon_takeup(th) + tension / model.tendon_stiffness
+    mm = MotionModel(model, OBJ, config)
+    settle = MotionConfig(**{**(config or MotionConfig()).__dict__, "max_iter": 500,
+                             "jump_theta": math.pi, "jump_pos": 1.0})
+    status, _ = mm.solve(st, u0, settle)
+    assert status[0] == 0
+    return mm, st.take(np.zeros(n, dtype=int)), u0
+
+
+def test_gradient_and_hessian_match_reference(modelo):
+    mm, st, u0 = grasp(modelo)
+    rng = np.random.default_rng(1)
+    st.theta += rng.normal(0, 0.02, st.theta.shape)
+    st.rot[0] = st.rot[0] @ rotvec_to_matrix(rng.normal(0, 0.02, 3))
+
+    def f(x):
+        return reference_energy(mm, st, 0, u0, st.theta[0] + x[:6].reshape(3, 2),
+                                st.pos[0] + x[6:9], st.rot[0] @ rotvec_to_matrix(x[9:]))
+
+    e, g, H = mm.evaluate(st, 0, u0)
+    assert e == pytest.approx(f(np.zeros(12)), rel=1e-12)
+    h = 1e-7
+    eye = np.eye(12)
+    g_num = np.array([(f(h * eye[i]) - f(-h * eye[i])) / (2 * h) for i in range(12)])
+    np.testing.assert_allclose(g, g_num, atol=1e-5 * np.abs(g).max() + 1e-6)
+    h = 1e-5
+    H_num = np.array([[(f(h * (eye[i] + eye[j])) - f(h * (eye[i] - eye[j]))
+                        - f(h * (eye[j] - eye[i])) + f(-h * (eye[i] + eye[j]))) / (4 * h * h)
+                       for j in range(12)] for i in range(12)])
+    np.testing.assert_allclose(H, H_num, atol=1e-6 * np.abs(H).max())
+
+
+def test_equilibrium_is_stationary_and_matches_scipy(modelo):
+    # A soft contact penalty keeps the plain reference minimiser well conditioned.
+    cfg = MotionConfig(contact_stiffness=1e4)
+    mm, st, u0 = grasp(modelo, n=3, config=cfg)
+    rng = np.random.default_rng(2)
+    u = u0 + rng.uniform(-3e-4, 3e-4, (3,))
+    start = st.copy()
+    status, _ = mm.solve(st, u)
+    assert np.all(status == 0)
+    for q in range(1):
+        _, g, _ = mm.evaluate(st, q, u)
+        assert np.abs(g).max() < 1e-6
+
+        def f(x, q=q):
+            return reference_energy(mm, start, q, u, start.theta[q] + x[:6].reshape(3, 2),
+                                    start.pos[q] + x[6:9] * 1e-3,
+                                    start.rot[q] @ rotvec_to_matrix(x[9:]))
+
+        res = minimize(f, np.zeros(12), method="BFGS", options={"gtol": 1e-12, "maxiter": 5000})
+        th_ref = start.theta[q] + res.x[:6].reshape(3, 2)
+        np.testing.assert_allclose(st.theta[q], th_ref, atol=2e-4)
+        np.testing.assert_allclose(st.pos[q], start.pos[q] + res.x[6:9] * 1e-3, atol=2e-6)
+
+
+def test_stiffness_changes_equilibrium(modelo):
+    # Observability (METHOD.md 8.2): with series tendon compliance, spring rates matter.
+    _, a, u0 = grasp(modelo)
+    stiff = np.array(modelo.stiffness)
+    stiff[0, 1] *= 2.0
+    _, b, _ = grasp(modelo, stiffness=stiff)
+    assert np.abs(a.theta - b.theta).max() > math.radians(0.5)
+
+
+def test_tendon_slack_has_zero_tension(modelo):
+    mm, st, u0 = grasp(modelo)
+    slack_u = modelo.tendon_takeup(st.theta[0]) - 1e-3
+    t = mm.tensions(st, slack_u)
+    assert np.all(t == 0.0)
+    assert np.all(mm.tensions(st, u0) > 0.0)
+
+
+def test_failed_solve_is_flagged_not_nan(modelo):
+    mm, st, u0 = grasp(modelo, n=4)
+    st.theta[1] = np.nan
+    st.theta[2, 0, 0] += 1.0  # far off: must settle beyond the jump limit
+    status, _ = mm.solve(st, u0)
+    assert status[0] == 0 and status[3] == 0
+    assert status[1] != 0 and status[2] != 0
+    assert not st.valid[1] and not st.valid[2]
+    from vlr.observation import ObservationModel, PomObservation
+
+    obs = PomObservation(st.pos[0], st.rot[0])
+    ll = ObservationModel().log_likelihood(st, obs)
+    assert np.isneginf(ll[1]) and np.isneginf(ll[2]) and np.isfinite(ll[0])
+
+
+def test_three_joint_two_finger_pinch():
+    ch = Chain(lengths=(0.04, 0.03), pad_center=(0.0, 0.003, 0.025), pad_radius=0.01,
+               pulley_radii=(0.008, 0.006, 0.005), stiffness=(0.04, 0.03, 0.02),
+               rest_angles=(-0.7, -0.6, -0.5), limits=((-0.35, 1.7), (0.0, 1.4), (0.0, 1.2)),
+               link_masses=(0.015, 0.012, 0.01),
+               link_coms=((0, 0, 0.02), (0, 0, 0.015), (0, 0, 0.012)))
+    model = HandModel.from_chains(("a", "b"), (ch, ch), [[0, -0.03, 0.01], [0, 0.03, 0.01]],
+                                  [math.pi / 2, -math.pi / 2], 2e4)
+    mm, st, u0 = grasp(model, n=2, theta=(0.1, 0.4, 0.4))
+    _, g, _ = mm.evaluate(st, 0, u0)
+    assert np.abs(g).max() < 1e-6
+    status, _ = mm.solve(st, u0 + np.array([2e-4, -2e-4]))
+    assert np.all(status == 0)
+    assert np.all(np.isfinite(st.theta))

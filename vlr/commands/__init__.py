@@ -1,0 +1,1 @@
+"""Subcommands of the `vlr` CLI contributed by the core (registered as `vlr.commands`)."""

@@ -1,0 +1,78 @@
+"""`vlr bench`: time one particle-filter iteration (Algorithm 1) at several particle counts.
+
+Each phase is timed separately: motion (Eq. 9 solve), observation (Eq. 5 likelihood),
+weights (tempering), resampling, jitter; "total" is their sum, "summary" (per-iteration
+quantiles for history) is reported apart. The world is the synthetic one (vlr.synthetic),
+so the numbers are those of a real identification run's iterations.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+PHASES = ("motion", "observation", "weights", "resampling", "jitter")
+
+
+def register(subparsers: argparse._SubParsersAction) -> None:
+    p = subparsers.add_parser("bench", help="time one filter iteration at 6k, 60k, 600k "
+                              "particles", description=__doc__)
+    p.add_argument("--particles", type=int, nargs="+", default=[6_000, 60_000, 600_000],
+                   help="particle counts (default: 6000 60000 600000)")
+    p.add_argument("--repeats", type=int, default=5, help="iterations timed per count")
+    p.add_argument("--json", type=Path, default=None,
+                   help="write {particles: median seconds per iteration} to this file")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=run)
+
+
+def bench_one(n_particles: int, repeats: int, seed: int = 0) -> dict[str, float]:
+    """Median seconds per phase of `repeats` filter iterations with n_particles."""
+    from vlr.filter import FilterConfig, ParticleFilter
+    from vlr.kinematics import HandModel
+    from vlr.motion import ObjectParams
+    from vlr.spec import load_hand
+    from vlr.synthetic import SyntheticConfig, SyntheticWorld, random_action
+
+    model = HandModel.from_spec(load_hand("modelo"))
+    obj = ObjectParams(mass=0.12, com=(0.0, 0.0, 0.03))
+    world = SyntheticWorld(model, obj, SyntheticConfig(seed=seed))
+    u = world.grasp()
+    pf = ParticleFilter(model, obj, FilterConfig(n_particles=n_particles, seed=seed))
+    pf.initialize(world.observe(), u, world.nominal.theta, world.nominal.contact)
+    rng = np.random.default_rng(seed + 1)
+    rows = []
+    for _ in range(repeats + 1):  # the first iteration also settles the prior: not timed
+        u = world.apply(random_action(rng, model.n_fingers))
+        obs = world.observe()
+        t0 = time.perf_counter()
+        pf.step(u, obs)
+        wall = time.perf_counter() - t0
+        row = dict(pf.timings)
+        row["total"] = sum(row[k] for k in PHASES)
+        row["wall"] = wall
+        rows.append(row)
+    rows = rows[1:]
+    return {k: float(np.median([r[k] for r in rows])) for k in rows[0]}
+
+
+def run(args: argparse.Namespace) -> int:
+    from vlr._energy_kernels import solve_batch  # noqa: F401  (compile/load the cache first)
+
+    results: dict[int, dict[str, float]] = {}
+    header = f"{'particles':>10} " + " ".join(f"{k:>11}" for k in (*PHASES, "total",
+                                                                     "summary"))
+    print(header)
+    for n in args.particles:
+        med = bench_one(n, args.repeats, args.seed)
+        results[n] = med
+        print(f"{n:>10} " + " ".join(f"{med[k]:>10.4f}s" for k in (*PHASES, "total",
+                                                                    "summary")), flush=True)
+    if args.json is not None:
+        args.json.write_text(json.dumps({str(n): r["total"] for n, r in results.items()},
+                                        indent=2) + "\n")
+    return 0
