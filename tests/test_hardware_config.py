@@ -22,6 +22,12 @@ def test_example_config_loads():
     assert cfg.camera.calibration.is_file()
 
 
+def test_sim_example_config_loads():
+    cfg = load_config(ROOT / "hardware" / "example_sim_config.yaml")
+    assert cfg.bus.port == "emulator" and cfg.camera.fake == "sim" and cfg.spread is None
+    assert cfg.camera.calibration is None
+
+
 def test_error_is_a_value_error_the_cli_prints():
     assert issubclass(HardwareConfigError, ValueError)
     assert issubclass(HardwareConfigError, SpecError)
