@@ -29,6 +29,8 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
+from vlr.perception import lens
+
 __all__ = ["DetectorConfig", "Detection", "detect_tags", "refine_edges", "get_detector"]
 
 
@@ -109,8 +111,8 @@ _MAX_SEED_ERROR = 4.0     # px: a coarse pass moving a corner further means a ba
 _MAX_CORNER_SHIFT = 1.5   # px: the fine pass moving a corner further means a bad fit
 
 
-def refine_edges(gray: np.ndarray, corners: np.ndarray,
-                 to_ideal: Callable[[np.ndarray], np.ndarray] | None = None) -> np.ndarray | None:
+def refine_edges(gray: np.ndarray, corners: np.ndarray, K: np.ndarray | None = None,
+                 dist: np.ndarray | None = None) -> np.ndarray | None:
     """Corners of the black square from line fits to its four sides, or None if unsure.
 
     For points 1 px apart along each side (away from the corners), the grey profile across
@@ -124,34 +126,43 @@ def refine_edges(gray: np.ndarray, corners: np.ndarray,
     without points beyond 3 robust sigmas, e.g. a finger over the edge), then the
     intersections of neighbouring lines, give the corners.
 
-    With lens distortion the sides are curved in the image: pass `to_ideal`, mapping image
-    points (N, 2) to ideal (undistorted pinhole) pixel coordinates; the lines are then fitted,
-    and the corners returned, in those ideal coordinates, where the sides are straight.
+    With lens distortion (K and a non-zero `dist`) the sides are curved in the image: the
+    geometry (sides, profiles, lines) then lives in ideal pinhole pixels of the same K, where
+    the sides are straight, and each sample is read at its distorted image position.
+
+    Two passes: a coarse one (profiles 4 px apart) takes seeds up to 4 px off to within
+    ~0.05 px; the fine one (1 px apart) starts there.
 
     Args:
         gray: uint8 image.
-        corners: (4, 2) seed corners in the image (within ~1 px), detector order.
-        to_ideal: optional undistortion of image points, see above.
-
-    Two passes: a coarse one (profiles 4 px apart, in image coordinates) takes seeds up to
-    4 px off to within ~0.05 px; the fine one (1 px apart, through `to_ideal`) starts there.
+        corners: (4, 2) seed corners in the image (within ~4 px), detector order.
+        K, dist: camera matrix and OpenCV distortion, or None for an ideal pinhole image.
 
     Returns:
-        (4, 2) refined corners (ideal coordinates if `to_ideal` is given), or None if a side
+        (4, 2) refined corners (in ideal pixels if there is distortion), or None if a side
         has too few good edge points or a corner moved too far (4 px in the coarse pass,
         1.5 px in the fine one).
     """
     seed = np.asarray(corners, dtype=np.float64).reshape(4, 2)
-    coarse = _refine_once(gray, seed, None, along_step=4.0, max_shift=_MAX_SEED_ERROR)
+    sample: Callable[[np.ndarray], np.ndarray]
+    if K is not None and dist is not None and np.any(np.asarray(dist) != 0):
+        seed = lens.to_ideal(seed, K, dist)
+
+        def sample(pts: np.ndarray) -> np.ndarray:
+            return _bilinear(gray, lens.to_image(pts, K, dist))
+    else:
+        def sample(pts: np.ndarray) -> np.ndarray:
+            return _bilinear(gray, pts)
+    coarse = _refine_once(sample, seed, along_step=4.0, max_shift=_MAX_SEED_ERROR)
     if coarse is None:
         return None
-    return _refine_once(gray, coarse, to_ideal, along_step=1.0, max_shift=_MAX_CORNER_SHIFT)
+    return _refine_once(sample, coarse, along_step=1.0, max_shift=_MAX_CORNER_SHIFT)
 
 
-def _refine_once(gray: np.ndarray, quad: np.ndarray,
-                 to_ideal: Callable[[np.ndarray], np.ndarray] | None,
+def _refine_once(sample: Callable[[np.ndarray], np.ndarray], quad: np.ndarray,
                  along_step: float, max_shift: float) -> np.ndarray | None:
-    """One pass of `refine_edges` from seed corners `quad` (4, 2)."""
+    """One pass of `refine_edges` from seed corners `quad` (4, 2); `sample` reads grey
+    values at points (..., 2)."""
     a = quad
     b = np.roll(quad, -1, axis=0)                      # side k runs from corner k to k+1
     lengths = np.linalg.norm(b - a, axis=1)
@@ -177,7 +188,7 @@ def _refine_once(gray: np.ndarray, quad: np.ndarray,
     t = margin[:, None] + u[None, :] * (lengths - 2 * margin)[:, None]      # (4, n_along)
     base = a[:, None, :] + t[..., None] * d[:, None, :]                     # (4, n_along, 2)
     pts = base[:, :, None, :] + s[None, None, :, None] * n[:, None, None, :]
-    prof = _bilinear(gray, pts)                                             # (4, n_along, n_s)
+    prof = sample(pts)                                                      # (4, n_along, n_s)
     q = max(2, len(s) // 4)  # plateaus: the outer quarter of the window on each side
     dark = prof[..., :q].mean(axis=-1)
     bright = prof[..., -q:].mean(axis=-1)
@@ -194,17 +205,15 @@ def _refine_once(gray: np.ndarray, quad: np.ndarray,
     for k in range(4):
         if np.count_nonzero(good[k]) < 8:
             return None
-        pts_k = edges[k][good[k]]
-        line = _fit_line(pts_k if to_ideal is None else to_ideal(pts_k))
+        line = _fit_line(edges[k][good[k]])
         if line is None:
             return None
         lines.append(line)
-    seeds = quad if to_ideal is None else to_ideal(quad)
     out = np.empty((4, 2))
     for k in range(4):
         # corner k joins side k-1 (from corner k-1 to k) and side k (from k to k+1)
         p = _intersect(lines[k - 1], lines[k])
-        if p is None or np.linalg.norm(p - seeds[k]) > max_shift:
+        if p is None or np.linalg.norm(p - quad[k]) > max_shift:
             return None
         out[k] = p
     return out

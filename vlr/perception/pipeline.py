@@ -9,6 +9,7 @@ import cv2
 import numpy as np
 
 from vlr.camera import CameraCalibration
+from vlr.perception import lens
 from vlr.perception.detect import DetectorConfig, detect_tags, refine_edges
 from vlr.perception.pose import solve_tag_pose
 
@@ -134,7 +135,7 @@ def observe(image: np.ndarray | None, calibration: CameraCalibration, tag_id: in
     config = config or DetectorConfig()
     h, w = gray.shape
     K, dist = calibration.K, calibration.dist
-    to_ideal = (lambda pts: _undistort(pts, K, dist)) if np.any(dist != 0) else None
+    distorted = bool(np.any(dist != 0))
     # The fast (ArUco3) detector first; the full one if it misses the tag or its corners do
     # not refine.
     seed = ideal = None
@@ -149,7 +150,7 @@ def observe(image: np.ndarray | None, calibration: CameraCalibration, tag_id: in
         if np.any(seed[:, 0] < m) or np.any(seed[:, 0] > w - 1 - m) \
                 or np.any(seed[:, 1] < m) or np.any(seed[:, 1] > h - 1 - m):
             return None
-        ideal = refine_edges(gray, seed, to_ideal)
+        ideal = refine_edges(gray, seed, K, dist)
         if ideal is not None:
             break
     if seed is None:
@@ -159,9 +160,9 @@ def observe(image: np.ndarray | None, calibration: CameraCalibration, tag_id: in
         # aruco's SUBPIX corners, about 0.15 px: still a pose, flagged as such.
         result = solve_tag_pose(seed, tag_size, K, dist)
         corners = seed
-    elif to_ideal is not None:
+    elif distorted:
         result = solve_tag_pose(ideal, tag_size, K, None)
-        corners = _distort(ideal, K, dist)
+        corners = lens.to_image(ideal, K, dist)
     else:
         result = solve_tag_pose(ideal, tag_size, K, None)
         corners = ideal
@@ -176,22 +177,3 @@ def observe(image: np.ndarray | None, calibration: CameraCalibration, tag_id: in
     return Observation(position=_frozen(T_palm_O[:3, 3]), rotation=_frozen(T_palm_O[:3, :3]),
                        reprojection_px=float(rms), corners=_frozen(corners),
                        tag_pose_cam=_frozen(T_cam_O), refined=refined)
-
-
-_UNDISTORT_CRITERIA = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 50, 1e-10)
-
-
-def _undistort(pts: np.ndarray, K: np.ndarray, dist: np.ndarray) -> np.ndarray:
-    """Image points (N, 2) -> ideal pinhole pixels (N, 2) of the same K."""
-    # The default 5 iterations leave ~0.1 px at the image corners of a k1 = -0.3 lens.
-    out = cv2.undistortPoints(pts.reshape(-1, 1, 2).astype(np.float64), K, dist, None, K,
-                              criteria=_UNDISTORT_CRITERIA)
-    return out.reshape(-1, 2)
-
-
-def _distort(pts: np.ndarray, K: np.ndarray, dist: np.ndarray) -> np.ndarray:
-    """Ideal pinhole pixels (N, 2) -> image points (N, 2) with distortion `dist`."""
-    norm = np.column_stack([(pts - K[:2, 2]) @ np.linalg.inv(K[:2, :2]).T,
-                            np.ones(len(pts))])
-    out, _ = cv2.projectPoints(norm, np.zeros(3), np.zeros(3), K, dist)
-    return out.reshape(-1, 2)
