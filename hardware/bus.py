@@ -198,15 +198,16 @@ class MotorBus:
         return f"motor {dxl_id} ({name})" if name else f"motor {dxl_id}"
 
     # ----------------------------------------------------------------- error handling
-    def _retry(self, what: str, dxl_id: int, attempt):
+    def _retry(self, what: str, ids: int | Sequence[int], attempt):
         """Run `attempt() -> (result, value)` until COMM_SUCCESS, at most 1 + retries times."""
+        ids = [ids] if isinstance(ids, int) else list(ids)
         result = COMM_SUCCESS
         for _ in range(self.retries + 1):
             result, value = attempt()
             if result == COMM_SUCCESS:
                 return value
             self.recover()
-        raise CommError(self._comm_message(what, [dxl_id], result), [dxl_id])
+        raise CommError(self._comm_message(what, ids, result), ids)
 
     def _comm_message(self, what: str, ids: Sequence[int], result: int) -> str:
         who = ", ".join(self.label(i) for i in ids)
@@ -289,7 +290,7 @@ class MotorBus:
 
         def attempt():
             return group.txPacket(), None
-        self._retry(f"sync write of {reg.name.lower()}", next(iter(values)), attempt)
+        self._retry(f"sync write of {reg.name.lower()}", list(values), attempt)
 
     def sync_read(self, regs: Sequence[Reg], ids: Sequence[int]) -> dict[int, dict[Reg, int]]:
         """Read the span covering `regs` from every motor in `ids` with one SYNC_READ.

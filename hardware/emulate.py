@@ -66,6 +66,9 @@ def run(args: argparse.Namespace) -> int:
     try:
         print(f"emulating motors {list(cfg.ids)} ({cfg.emulator.plant} plant) on {port}")
         print(f"put this in {cfg.path}:  bus: {{port: {port}, baud: {cfg.bus.baud}}}")
+        if cfg.emulator.plant == "sim":
+            print("note: the simulated camera frames are served only in-process (bus.port: "
+                  "emulator); through this port use camera.fake: blank or a real camera")
         print("(Ctrl-C to stop)", flush=True)
         deadline = None if args.seconds is None else time.monotonic() + args.seconds
         while deadline is None or time.monotonic() < deadline:
