@@ -77,15 +77,27 @@ class Truth:
     rotation: np.ndarray
 
 
-def nominal_grasp(model: HandModel, config: SyntheticConfig) -> NominalGrasp:
-    """Nominal grasp guess from the hand's nominal geometry: every finger at
-    `config.grasp_theta`, contacts at `grasp_contact`, command u_0 = s(theta) + T / k_t
-    (Eq. 7, compliant)."""
+def nominal_grasp(model: HandModel, obj: ObjectParams, config: SyntheticConfig) -> NominalGrasp:
+    """Nominal grasp guess from the hand's nominal geometry (what a user can compute).
+
+    Every finger starts at `config.grasp_theta` with its contact at `grasp_contact`, the POM
+    `pom_depth` below the contacts; the command is u_0 = s(theta) + T / k_t (Eq. 7,
+    compliant); the guess is the nominal model's equilibrium there (Eq. 9). Settling matters:
+    the starting angles are far from equilibrium (the spring preload curls one finger and
+    straightens the others), and a prior centred off-equilibrium loses most particles."""
     nf = model.n_fingers
     theta = np.tile(np.asarray(config.grasp_theta, dtype=float), (nf, 1))
     contact = np.tile(np.asarray(config.grasp_contact, dtype=float), (nf, 1))
     u0 = model.tendon_takeup(theta) + config.grasp_tension / model.tendon_stiffness
-    return NominalGrasp(theta, contact, u0)
+    st = ParticleState.nominal(model, 1, theta, normals_from_angles(contact[:, 0], contact[:, 1]),
+                               np.zeros(3), np.eye(3))
+    st.pos[0] = st.contacts(model)[0].mean(axis=0) - np.array([0.0, 0.0, config.pom_depth])
+    st.anchor_to_pose(model)
+    settle = replace(config.motion, max_iter=500, jump_theta=np.pi, jump_pos=1.0)
+    status, _ = MotionModel(model, obj, config.motion).solve(st, u0, settle)
+    if status[0] != 0:
+        raise RuntimeError(f"nominal grasp did not settle (status {status[0]})")
+    return NominalGrasp(st.theta[0].copy(), contact, u0)
 
 
 def random_action(rng: np.random.Generator, n_fingers: int,
@@ -121,7 +133,7 @@ class SyntheticWorld:
         self.rng = np.random.default_rng(self.config.seed)
         self._stiffness_overrides = dict(stiffness_overrides or {})
         self._tendon = tendon_stiffness
-        self.nominal = nominal_grasp(self.nominal_model, self.config)
+        self.nominal = nominal_grasp(self.nominal_model, obj, self.config)
         self.state: ParticleState | None = None
         self._commands = np.zeros(true_model.n_fingers)
 
