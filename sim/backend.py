@@ -139,7 +139,11 @@ class SimHand:
         if self._calibration is None:
             from sim.camera import calibration_of
 
-            self._calibration = calibration_of(self.model, self.data)
+            cal = calibration_of(self.model, self.data)
+            distortion = getattr(self.options.effects, "distortion", None)
+            if distortion is not None:  # the lens distorts; a calibration would measure it
+                cal = replace(cal, dist=np.asarray(distortion, dtype=float))
+            self._calibration = cal
         return self._calibration
 
     def grasp(self) -> ApplyReport:

@@ -12,16 +12,14 @@ import os
 import sys
 from importlib.metadata import entry_points
 
+from vlr.errors import UserError
+
 # Headless rendering is the project's choice, not the user's (EGL on Mesa on CPU).
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 COMMAND_GROUP = "vlr.commands"
 BACKEND_GROUP = "vlr.backends"
-
-
-class UserError(Exception):
-    """An error the user can fix; printed as one line, without a traceback."""
 
 
 def open_backend(name: str, **options):
@@ -56,6 +54,7 @@ def _unavailable(exc: Exception) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from vlr.hand import CommandError, GraspError
     from vlr.spec import SpecError
 
     parser = build_parser()
@@ -65,7 +64,7 @@ def main(argv: list[str] | None = None) -> int:
         return 2
     try:
         return int(args.func(args) or 0)
-    except (UserError, SpecError, FileNotFoundError) as exc:
+    except (UserError, SpecError, FileNotFoundError, GraspError, CommandError) as exc:
         print(f"vlr {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
