@@ -181,14 +181,16 @@ def calibration_from_mujoco_camera(fovy_deg: float, width: int, height: int,
     MuJoCo renders with OpenGL: `fovy` spans the full image height measured between pixel
     EDGES, and the optical axis passes through the middle of the viewport, i.e. at edge
     coordinate (width/2, height/2). OpenCV puts pixel (0, 0)'s centre at coordinate 0, so its
-    edges are at -0.5 and the optical axis is at ((width - 1)/2, (height - 1)/2). Verified to
-    about 0.01 px against rendered spheres in tests/test_camera_calibration.py; using
-    (width/2, height/2) instead shifts every pose by half a pixel.
+    edges are at -0.5 and the optical axis is at ((width - 1)/2, (height - 1)/2). Checked
+    against MuJoCo renders (tests/test_camera_calibration.py): a sphere on the optical axis
+    lands exactly there, off-axis spheres within 0.07 px (their centroids' own aliasing)
+    where (width/2, height/2) is 0.5 px off; rendered tags give poses within 2 um.
     """
     if not (math.isfinite(fovy_deg) and 0 < fovy_deg < 180):
         raise CalibrationError(f"fovy_deg = {fovy_deg!r} must be in (0, 180)")
     f = (height / 2.0) / math.tan(math.radians(fovy_deg) / 2.0)
-    # Square pixels: MuJoCo derives the horizontal extent from the aspect ratio.
+    # Square pixels: MuJoCo derives the horizontal extent from the aspect ratio. The principal
+    # point is the viewport centre in OpenCV's pixel-centre coordinates (see above).
     K = np.array([[f, 0.0, (width - 1) / 2.0],
                   [0.0, f, (height - 1) / 2.0],
                   [0.0, 0.0, 1.0]])
