@@ -53,8 +53,8 @@ def test_yaml_round_trip_is_exact(tmp_path: Path) -> None:
 def test_yaml_accepts_a_quaternion(tmp_path: Path) -> None:
     cal = _calibration()
     q = Rotation.from_matrix(cal.T_palm_cam[:3, :3]).as_quat()  # x, y, z, w
-    data = yaml.safe_load((lambda p: (save_calibration(cal, p), p.read_text())[1])(
-        tmp_path / "a.yaml"))
+    save_calibration(cal, tmp_path / "a.yaml")
+    data = yaml.safe_load((tmp_path / "a.yaml").read_text())
     del data["extrinsics"]["rotation"]
     data["extrinsics"]["quaternion_xyzw"] = q.tolist()
     path = tmp_path / "q.yaml"
