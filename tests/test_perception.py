@@ -27,7 +27,7 @@ from vlr.perception import (
     refine_edges,
     solve_tag_pose,
 )
-from vlr.perception.pose import _IPPE_ORDER, _rz, object_corners
+from vlr.perception.pose import _IPPE_ORDER, _rz, object_corners, reprojection_rms
 
 TAG_ID = 3
 TAG_SIZE = 0.030  # the objects' black square (models/objects/*.yaml)
@@ -233,6 +233,24 @@ def test_reprojection_threshold(cal640) -> None:
     # reprojection check is for bad corners; a wrong size scales the distance instead
     big = observe(image, cal640, TAG_ID, 2 * TAG_SIZE)
     assert big is not None and big.position[2] == pytest.approx(2 * obs.position[2], rel=1e-6)
+
+
+def test_unrefinable_tags_need_allow_unrefined(cal640) -> None:
+    # 0.5 m away the 30 mm tag is 25 px wide, cells 3 px: too small for edge profiles
+    T = pose_cam_object(0.5, 10.0, 30.0, 10.0)
+    image = render_tag(cal640, T, TAG_ID, TAG_SIZE)
+    assert observe(image, cal640, TAG_ID, TAG_SIZE) is None
+    obs = observe(image, cal640, TAG_ID, TAG_SIZE, allow_unrefined=True)
+    assert obs is not None and not obs.refined
+    assert np.max(np.abs(obs.corners - true_corners(cal640, T, TAG_SIZE))) < 2.0
+
+
+def test_reprojection_rms_of_the_true_pose_is_zero(cal640) -> None:
+    T = pose_cam_object(0.05, 20.0, 10.0, 5.0)
+    corners = true_corners(cal640, T, TAG_SIZE)
+    assert reprojection_rms(T, TAG_SIZE, corners, cal640.K) < 1e-9
+    assert reprojection_rms(T, TAG_SIZE, corners + [0.3, 0.4], cal640.K) \
+        == pytest.approx(0.5, abs=1e-9)
 
 
 def test_colour_images_are_accepted(cal640) -> None:

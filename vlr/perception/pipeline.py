@@ -32,7 +32,7 @@ class Observation:
             bottom-left).
         tag_pose_cam: T_cam_O, 4x4, the tag in the OpenCV camera frame [m].
         refined: the corners come from the edge-line refinement (about 0.01 px); False means
-            the fallback SUBPIX corners (about 0.15 px) were used.
+            aruco's SUBPIX corners (about 0.15 px), only with `observe(allow_unrefined=True)`.
     """
 
     position: np.ndarray
@@ -97,7 +97,7 @@ def _check_args(calibration: CameraCalibration, tag_id: int, tag_size: float,
 
 def observe(image: np.ndarray | None, calibration: CameraCalibration, tag_id: int,
             tag_size: float, *, max_reprojection_px: float = 2.0,
-            border_margin_px: float = 3.0,
+            border_margin_px: float = 3.0, allow_unrefined: bool = False,
             config: DetectorConfig | None = None) -> Observation | None:
     """The pose of tag `tag_id` (black square `tag_size` [m]) in the palm frame, or None.
 
@@ -108,9 +108,15 @@ def observe(image: np.ndarray | None, calibration: CameraCalibration, tag_id: in
 
     Returns None, never a stale or partial pose, when the image is None, empty or flat (e.g.
     black); no tag or only other ids are found; the id is found more than once; a corner lies
-    within `border_margin_px` of the image edge (a tag partly out of view); the pose is not
-    finite or lies behind the camera; or the RMS reprojection error exceeds
-    `max_reprojection_px`.
+    within `border_margin_px` of the image edge (a tag partly out of view); the corners do
+    not refine (cells under 3 px, an edge largely hidden) unless `allow_unrefined`; the pose
+    is not finite or lies behind the camera; or the RMS reprojection error exceeds
+    `max_reprojection_px`. (Four corners always fit a square closely, so the reprojection
+    check only catches gross failures.)
+
+    `allow_unrefined` accepts aruco's SUBPIX corners from the full detector when the edge
+    refinement fails, flagged `refined=False`: about 10x the pose error for tags of a few
+    hundred pixels, and mm or degrees for tags of 30 px, so the default refuses them.
 
     Raises:
         ValueError: for bad arguments: a non-uint8 image or one of another shape or size than
@@ -137,8 +143,9 @@ def observe(image: np.ndarray | None, calibration: CameraCalibration, tag_id: in
     K, dist = calibration.K, calibration.dist
     distorted = bool(np.any(dist != 0))
     # The fast (ArUco3) detector first; the full one if it misses the tag or its corners do
-    # not refine.
-    seed = ideal = None
+    # not refine. Unrefined corners are used only from the full detector (SUBPIX, within
+    # ~0.5 px); the fast one's can be 3 px off.
+    ideal = fallback = None
     for fast in ((True, False) if config.fast_min_side_ratio is not None else (False,)):
         found = [d for d in detect_tags(gray, config, fast) if d.tag_id == tag_id]
         if len(found) > 1:  # a duplicated id: no way to tell which is the object's
@@ -153,19 +160,17 @@ def observe(image: np.ndarray | None, calibration: CameraCalibration, tag_id: in
         ideal = refine_edges(gray, seed, K, dist)
         if ideal is not None:
             break
-    if seed is None:
-        return None
-    refined = ideal is not None
-    if not refined:
-        # aruco's SUBPIX corners, about 0.15 px: still a pose, flagged as such.
-        result = solve_tag_pose(seed, tag_size, K, dist)
-        corners = seed
-    elif distorted:
+        if not fast:
+            fallback = seed
+    if ideal is not None:
         result = solve_tag_pose(ideal, tag_size, K, None)
-        corners = lens.to_image(ideal, K, dist)
+        corners = lens.to_image(ideal, K, dist) if distorted else ideal
+    elif fallback is not None and allow_unrefined:
+        # flagged by refined=False: about 0.15 px corners, ~10x the pose error
+        result = solve_tag_pose(fallback, tag_size, K, dist)
+        corners = fallback
     else:
-        result = solve_tag_pose(ideal, tag_size, K, None)
-        corners = ideal
+        return None
     if result is None:
         return None
     T_cam_O, rms = result
@@ -176,4 +181,4 @@ def observe(image: np.ndarray | None, calibration: CameraCalibration, tag_id: in
     T_palm_O = calibration.T_palm_cam @ T_cam_O
     return Observation(position=_frozen(T_palm_O[:3, 3]), rotation=_frozen(T_palm_O[:3, :3]),
                        reprojection_px=float(rms), corners=_frozen(corners),
-                       tag_pose_cam=_frozen(T_cam_O), refined=refined)
+                       tag_pose_cam=_frozen(T_cam_O), refined=ideal is not None)
