@@ -139,7 +139,8 @@ class SimHand:
         if self._calibration is None:
             from sim.camera import calibration_of
 
-            cal = calibration_of(self.model, self.data)
+            cal = calibration_of(self.model, self.data, self.options.width,
+                                 self.options.height)
             distortion = getattr(self.options.effects, "distortion", None)
             if distortion is not None:  # the lens distorts; a calibration would measure it
                 cal = replace(cal, dist=np.asarray(distortion, dtype=float))

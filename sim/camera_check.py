@@ -106,6 +106,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
+def _dist(d: dict, digits: int) -> str:
+    if d["median"] is None:
+        return "n/a (no detection)"
+    return " ".join(f"{k} {d[k]:.{digits}f}" for k in ("median", "p95", "max"))
+
+
 def _size(text: str) -> tuple[int, int]:
     from vlr.cli import UserError
 
@@ -136,11 +142,8 @@ def run(args: argparse.Namespace) -> int:
         r = camera_trial(obj, actions=args.actions, seed=args.seed, width=width,
                          height=height, effects=effects)
         s = r.summary()
-        print(f"{obj:18s} detected {r.detected}/{r.frames}  position mm median "
-              f"{s['position_mm']['median']:.4f} p95 {s['position_mm']['p95']:.4f} max "
-              f"{s['position_mm']['max']:.4f}  orientation deg median "
-              f"{s['orientation_deg']['median']:.3f} p95 {s['orientation_deg']['p95']:.3f} "
-              f"max {s['orientation_deg']['max']:.3f}")
+        print(f"{obj:18s} detected {r.detected}/{r.frames}  position mm "
+              f"{_dist(s['position_mm'], 4)}  orientation deg {_dist(s['orientation_deg'], 3)}")
         reports.append(r)
     total = merge(reports).summary()
     print(f"all: detection {total['detection_rate']:.3f}; render {total['render_ms_median']:.1f}"

@@ -52,3 +52,15 @@ def test_blacked_out_frame_is_no_observation():
         image = np.zeros_like(hand.grab_frame().image)
         spec = hand.object_spec
         assert observe(image, hand.calibration, spec.tag_id, spec.tag_size) is None
+
+
+def test_lower_resolution_calibration_matches_its_frames():
+    from sim.backend import SimOptions
+
+    with SimHand("apple", options=SimOptions(width=320, height=240)) as hand:
+        hand.grasp()
+        frame = hand.grab_frame()
+        assert frame.image.shape[:2] == (240, 320)
+        assert (hand.calibration.width, hand.calibration.height) == (320, 240)
+        spec = hand.object_spec
+        assert observe(frame.image, hand.calibration, spec.tag_id, spec.tag_size) is not None
