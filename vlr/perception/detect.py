@@ -118,9 +118,10 @@ def refine_edges(gray: np.ndarray, corners: np.ndarray, K: np.ndarray | None = N
     """Corners of the black square from line fits to its four sides, or None if unsure.
 
     For points 1 px apart along each side (away from the corners), the grey profile across
-    the side is read by bilinear interpolation over +-min(0.4 cell, 6 px), where the inside
-    stays on the tag's black border and the outside on its white border. The edge position
-    on each profile is found by the area (first-moment) rule:
+    the side is read by bilinear interpolation over +-min(0.6 cell, 6 px), the cell measured
+    across that side, where the inside stays on the tag's black border and the outside on
+    its white border. The edge position on each profile is found by the area (first-moment)
+    rule:
         e = s_hi - integral (I(s) - I_dark) / (I_bright - I_dark) ds,
     which is exact for any blur (symmetric or not) as long as the window holds the whole
     transition, and, unlike a 50 % crossing on interpolated samples, has no bias on sharp,
@@ -132,8 +133,8 @@ def refine_edges(gray: np.ndarray, corners: np.ndarray, K: np.ndarray | None = N
     geometry (sides, profiles, lines) then lives in ideal pinhole pixels of the same K, where
     the sides are straight, and each sample is read at its distorted image position.
 
-    Two passes: a coarse one (profiles 4 px apart) takes seeds up to 4 px off to within
-    ~0.05 px; the fine one (1 px apart) starts there.
+    Two passes: a coarse one (profiles 4 px apart, +-0.45 cell) takes seeds up to 4 px off
+    (less for small cells) to within ~0.05 px; the fine one (1 px apart) starts there.
 
     Args:
         gray: uint8 image.
@@ -156,55 +157,63 @@ def refine_edges(gray: np.ndarray, corners: np.ndarray, K: np.ndarray | None = N
     else:
         def sample(x: np.ndarray, y: np.ndarray) -> np.ndarray:
             return _bilinear(gray, x, y)
-    coarse = _refine_once(sample, seed, along_step=4.0, max_shift=_MAX_SEED_ERROR)
+    coarse = _refine_once(sample, seed, along_step=4.0, window_cells=0.45,
+                          max_shift=_MAX_SEED_ERROR)
     if coarse is None:
         return None
-    return _refine_once(sample, coarse, along_step=1.0, max_shift=_MAX_CORNER_SHIFT)
+    # Centred on the edges now: a wider window (0.6 cell) holds more of a blurred transition.
+    return _refine_once(sample, coarse, along_step=1.0, window_cells=0.6,
+                        max_shift=_MAX_CORNER_SHIFT)
 
 
 def _refine_once(sample: Callable[[np.ndarray, np.ndarray], np.ndarray], quad: np.ndarray,
-                 along_step: float, max_shift: float) -> np.ndarray | None:
+                 along_step: float, window_cells: float, max_shift: float) -> np.ndarray | None:
     """One pass of `refine_edges` from seed corners `quad` (4, 2); `sample(x, y)` reads
     grey values at points with coordinates x, y."""
     a = quad
     b = np.roll(quad, -1, axis=0)                      # side k runs from corner k to k+1
     lengths = np.linalg.norm(b - a, axis=1)
-    # The shortest side bounds the cell width across every side (perspective foreshortens).
-    cell = float(lengths.min()) / _CELLS
-    if cell < 3.0:  # too small for profiles that stay within one cell
-        return None
     d = (b - a) / lengths[:, None]
     n = np.column_stack([-d[:, 1], d[:, 0]])
     outward = np.einsum("ij,ij->i", n, (a + b) / 2 - quad.mean(axis=0)) > 0
     n[~outward] *= -1                                  # towards the white border
-    # +-0.4 cell keeps the window on the tag's borders; 6 px holds a blur of sigma 1.5 px
-    # plus the seed's error.
-    half = min(0.4 * cell, _MAX_HALF_WINDOW)
-    s = np.arange(-half, half + 1e-9, _PROFILE_STEP)
-    # Same number of profiles per side, spread over each side minus the corner margins
-    # (blur width and seed error).
-    margin = np.maximum(3.0, 0.08 * lengths)
-    n_along = int((lengths.min() - 2 * margin.max()) / along_step) + 1
-    if n_along < 8:
+    # Cell width ACROSS each side (perspective foreshortens it): the square's extent along
+    # the side's normal, from the two opposite corners, over 8 cells.
+    opposite = np.stack([np.roll(quad, -2, axis=0), np.roll(quad, -3, axis=0)], axis=1)
+    across = np.abs(np.einsum("kjc,kc->kj", opposite - a[:, None, :], n)).mean(axis=1)
+    cell = across / _CELLS
+    if cell.min() < 3.0:  # too small for profiles that stay within one cell
         return None
-    u = np.linspace(0.0, 1.0, n_along)
-    t = margin[:, None] + u[None, :] * (lengths - 2 * margin)[:, None]      # (4, n_along)
+    # The window stays on the tag's one-cell borders (black inside, white outside) with room
+    # for the seed's error; 6 px holds a blur of sigma 1.5 px.
+    half = np.minimum(window_cells * cell, _MAX_HALF_WINDOW)                 # (4,)
+    n_s = 2 * int(np.ceil(half.max() / _PROFILE_STEP)) + 1
+    s = half[:, None] * np.linspace(-1.0, 1.0, n_s)                          # (4, n_s)
+    step = 2.0 * half / (n_s - 1)
+    # Same number of profiles per side (vectorised), at most along_step apart, clear of the
+    # corners by the blur width and the seed error.
+    margin = np.maximum(3.0, 0.08 * lengths)
+    usable = lengths - 2 * margin
+    if usable.min() < 8.0:
+        return None
+    n_along = int(usable.max() / along_step) + 1
+    t = margin[:, None] + np.linspace(0.0, 1.0, n_along)[None, :] * usable[:, None]
     base = a[:, None, :] + t[..., None] * d[:, None, :]                     # (4, n_along, 2)
     # profile sample points (4, n_along, n_s), x and y apart: no interleaved copies
-    x = base[..., 0, None] + s * n[:, 0, None, None]
-    y = base[..., 1, None] + s * n[:, 1, None, None]
+    x = base[..., 0, None] + s[:, None, :] * n[:, 0, None, None]
+    y = base[..., 1, None] + s[:, None, :] * n[:, 1, None, None]
     prof = sample(x, y)
-    q = max(2, len(s) // 4)  # plateaus: the outer quarter of the window on each side
+    q = max(2, n_s // 4)  # plateaus: the outer quarter of the window on each side
     dark = prof[..., :q].mean(axis=-1)
     bright = prof[..., -q:].mean(axis=-1)
     contrast = bright - dark
-    # trapezoid integral from s[0] to s[-1] of the bright fraction (I - dark) / contrast
+    # trapezoid integral from -half to +half of the bright fraction (I - dark) / contrast
     trapezoid = prof.sum(axis=-1) - 0.5 * (prof[..., 0] + prof[..., -1])
     with np.errstate(divide="ignore", invalid="ignore"):
-        area = _PROFILE_STEP * (trapezoid - (len(s) - 1) * dark) / contrast
-    e = s[-1] - area
+        area = step[:, None] * (trapezoid - (n_s - 1) * dark) / contrast
+    e = half[:, None] - area
     good = (contrast > np.maximum(10.0, 0.5 * np.median(contrast, axis=1, keepdims=True))) \
-        & (np.abs(e) < 0.75 * half)
+        & (np.abs(e) < 0.75 * half[:, None])
     edges = base + e[..., None] * n[:, None, :]
     lines = []
     for k in range(4):
