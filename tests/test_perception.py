@@ -83,6 +83,20 @@ def test_pose_accuracy_on_synthetic_images(size, noise, blur) -> None:
     assert max(pos_err) < 2e-5 and max(rot_err) < 0.1, (pos_err, rot_err)
 
 
+@pytest.mark.parametrize("size, tilt", [((640, 480), 60.0), ((320, 240), 50.0)])
+def test_steeply_viewed_tag(size, tilt) -> None:
+    # Cells across the far sides shrink to 4-5 px: the refinement windows follow them.
+    cal = ideal_calibration(*size, 60.0)
+    rng = np.random.default_rng(11)
+    for axis in (0.0, 70.0, 135.0, 250.0):
+        T = pose_cam_object(0.06, tilt, axis, 20.0)
+        image = _noisy(render_tag(cal, T, TAG_ID, TAG_SIZE), rng, 2.0, 0.7)
+        obs = observe(image, cal, TAG_ID, TAG_SIZE)
+        assert obs is not None and obs.refined
+        assert np.linalg.norm(obs.position - T[:3, 3]) < 1e-4
+        assert rotation_error_deg(obs.rotation, T[:3, :3]) < 0.5
+
+
 def test_exactly_face_on_is_finite_and_correct() -> None:
     # R_cam_M = Rx(pi) for a face-on tag: OpenCV's IPPE_SQUARE reports success with NaN or a
     # pose tens of pixels off there; and so for O's frame at a spin of pi.
