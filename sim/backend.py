@@ -238,6 +238,10 @@ class SimHand:
         """Ground truth for scoring (joint angles, contacts, POM pose, tensions, parameters)."""
         return read_truth(self)
 
+    def scoring_truth(self):
+        """Ground truth in the estimator's terms, for scoring only (`scoring_truth`)."""
+        return scoring_truth(self)
+
     def tensions(self) -> np.ndarray:
         """Tendon tensions [N] (positive = pulling)."""
         return -self.data.actuator_force[self._act].copy()
@@ -313,3 +317,27 @@ def open_hand(*, object: str = "apple", hand: str = "modelo", seed: int = 0,
               config: str | None = None, **options) -> SimHand:
     """Backend factory for the CLI (`--backend sim`)."""
     return SimHand(object=object, hand=hand, seed=seed, options=SimOptions(**options))
+
+
+def scoring_truth(hand: SimHand):
+    """The sim's truth in the estimator's terms (vlr.synthetic.Truth), for SCORING only:
+    joint angles, pad contact angles and normals, segments (link lengths and the pad centre's
+    z offset), stiffness, tendon stiffness, and the POM pose."""
+    from vlr.kinematics import angles_from_normals
+    from vlr.synthetic import Truth
+
+    t = hand.truth()
+    fingers = [hand.true_spec.mount(s).finger for s in hand.slots]
+    theta = np.array([t.fingers[s].angles for s in hand.slots])
+    normals = []
+    for s, f in zip(hand.slots, fingers, strict=True):
+        n = t.fingers[s].contact_distal - np.asarray(f.pad_center)
+        norm = np.linalg.norm(n)
+        normals.append(n / norm if np.isfinite(norm) and norm > 0 else np.full(3, np.nan))
+    normals = np.array(normals)
+    a, b = angles_from_normals(normals)
+    return Truth(theta=theta, contact=np.stack([a, b], -1), normals=normals,
+                 segments=np.array([[f.proximal_length, f.pad_center[2]] for f in fingers]),
+                 stiffness=np.array([f.stiffness for f in fingers]),
+                 tendon=np.full(len(fingers), hand.true_spec.tendon_stiffness),
+                 position=t.pom_position, rotation=t.pom_rotation)

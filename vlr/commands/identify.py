@@ -1,0 +1,249 @@
+"""`vlr identify`: self-identification on any backend (Algorithm 1), with result files.
+
+Writes into --out: `result.json` (errors against ground truth where the backend has one,
+coverage, timing), `history.npz` (per-iteration posterior means, 95% bounds, ESS, and the
+truth when known) and `convergence.png` (per proximal joint: estimate, 95% band and truth
+against iteration, like the paper's Fig. 4C).
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+
+from vlr.errors import UserError
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("identify", help="self-identify the hand-object system (joint angles, "
+                       "contacts, unknown stiffness or link lengths)")
+    p.add_argument("--backend", default="sim", help="sim | synthetic | hardware")
+    p.add_argument("--object", default="apple")
+    p.add_argument("--hand", default="modelo", help="the hand the user believes in (nominal)")
+    p.add_argument("--true-hand", help="synthetic world only: the real hand, if different")
+    p.add_argument("--particles", type=int, default=60_000)
+    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--unknown", action="append", default=[],
+                   help="extra unknown, e.g. stiffness:thumb.distal or length:left.proximal")
+    p.add_argument("--max-iterations", type=int, default=40)
+    p.add_argument("--config", help="hardware backend: the hardware YAML file")
+    p.add_argument("--out", default="runs/identify", help="output folder")
+    p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from vlr.cli import open_backend
+    from vlr.filter import FilterConfig
+    from vlr.identify import IdentifyConfig, identify
+    from vlr.kinematics import HandModel
+    from vlr.motion import ObjectParams
+    from vlr.spec import load_hand, load_object
+    from vlr.synthetic import SyntheticConfig, SyntheticWorld, nominal_grasp
+
+    if args.particles < 10:
+        raise UserError(f"--particles {args.particles} must be >= 10")
+    if args.max_iterations < 1:
+        raise UserError(f"--max-iterations {args.max_iterations} must be >= 1")
+    out = Path(args.out)
+    hand_spec = load_hand(args.hand)
+    obj_spec = load_object(args.object)
+    model = HandModel.from_spec(hand_spec)
+    obj = ObjectParams.from_spec(obj_spec)
+    try:
+        fcfg = FilterConfig(n_particles=args.particles, seed=args.seed,
+                            unknowns=tuple(args.unknown))
+        from vlr.filter import parse_unknown
+
+        for u in args.unknown:
+            parse_unknown(u, model)
+    except (ValueError, KeyError) as exc:
+        raise UserError(f"--unknown: {exc}") from None
+    cfg = IdentifyConfig(max_iterations=args.max_iterations, filter=fcfg)
+    nominal = nominal_grasp(model, obj, SyntheticConfig())
+    hand = None
+    if args.backend == "synthetic":
+        true_model = HandModel.from_spec(load_hand(args.true_hand)) if args.true_hand else model
+        world = SyntheticWorld(true_model, obj, SyntheticConfig(seed=args.seed),
+                               nominal_model=model)
+        observer, truth = world.observe, world.truth
+    else:
+        from vlr.perception import observe
+
+        options = {"config": args.config} if args.config else {}
+        hand = open_backend(args.backend, object=args.object, hand=args.hand,
+                            seed=args.seed, **options)
+        world = hand
+        spec = hand.object_spec
+
+        def observer():
+            frame = hand.grab_frame()
+            if frame is None:
+                return None
+            return observe(frame.image, hand.calibration, spec.tag_id, spec.tag_size)
+
+        truth = getattr(hand, "scoring_truth", None)  # sim only; never given to the filter
+    bar = None
+    if not args.quiet:
+        from tqdm import tqdm
+
+        bar = tqdm(total=args.max_iterations, desc="identify", unit="it")
+
+    def progress(rec) -> None:
+        if bar is not None:
+            bar.set_postfix(ci_deg=f"{rec.ci_deg:.2f}", ess=f"{rec.ess:.0f}")
+            if rec.iteration:
+                bar.update(1)
+
+    t0 = time.perf_counter()
+    _last_truth = None
+    if truth is not None and hand is not None:
+        def truth_and_keep():  # scoring only; read before the backend closes
+            nonlocal _last_truth
+            _last_truth = truth()
+            return _last_truth
+        scorer = truth_and_keep
+    else:
+        scorer = truth
+    try:
+        result = identify(world, observer, model, obj, nominal, cfg, truth=scorer,
+                          progress=progress)
+    finally:
+        if bar is not None:
+            bar.close()
+        if hand is not None:
+            hand.close()
+    final_truth = None
+    if truth is not None:
+        final_truth = truth() if hand is None else _last_truth
+    summary = summarize(result, model, args, time.perf_counter() - t0, final_truth)
+    write_outputs(out, result, summary, model)
+    print(format_table(result, summary, model))
+    print(f"\nwrote {out / 'result.json'}, {out / 'history.npz'}, {out / 'convergence.png'}")
+    return 0
+
+
+def summarize(result, model, args, wall: float, final_truth=None) -> dict:
+    """The result.json content: errors against the truth at the final iteration."""
+    n, k = model.n_fingers, model.n_joints
+    out: dict = {"backend": args.backend, "object": args.object, "hand": args.hand,
+                 "particles": args.particles, "seed": args.seed, "unknowns": args.unknown,
+                 "converged": bool(result.converged), "iterations": int(result.iterations),
+                 "converged_at": result.converged_at,
+                 "estimates": {name: vars(e) for name, e in result.theta.items()},
+                 "unknown_estimates": {name: vars(e) for name, e in result.unknowns.items()},
+                 "timing": {"filter_s_per_iteration_median": float(np.median(result.seconds)),
+                            "wall_s": wall}}
+    if result.scores:
+        s = result.scores[-1]
+        err = s.theta_error_deg.reshape(n, k)
+        errors = {"proximal_deg_mean": float(err[:, 0].mean()),
+                  "distal_deg_mean": float(err[:, 1:].mean()),
+                  "proximal_deg": dict(zip(model.names, err[:, 0].tolist(), strict=True))}
+        if final_truth is not None:
+            from vlr.kinematics import contact_in_distal
+
+            c_true = contact_in_distal(model, final_truth.normals[None],
+                                       final_truth.segments[None])[0]
+            err_c = np.linalg.norm(result.contacts - c_true, axis=-1) * 1e3
+            if np.all(np.isfinite(err_c)):  # a finger without contact has no contact error
+                errors["contact_mm_mean"] = float(err_c.mean())
+        lengths, stiff = {}, {}
+        for spec, e in s.unknown_error.items():
+            kind, _, rest = spec.partition(":")
+            if kind == "length":
+                lengths[rest.split(".")[0]] = abs(e) * 1e3
+            elif kind == "stiffness":
+                stiff[rest] = abs(e)
+        if lengths:
+            errors["link_length_mm"] = lengths
+        if stiff:
+            errors["stiffness"] = stiff
+        out["errors"] = errors
+        covered = list(s.theta_covered) + list(s.unknown_covered.values())
+        out["coverage"] = float(np.mean(covered))
+    return out
+
+
+def write_outputs(out: Path, result, summary: dict, model) -> None:
+    """result.json, history.npz and convergence.png, each written atomically."""
+    import os
+    import tempfile
+
+    from vlr.io import write_json_atomic
+
+    out.mkdir(parents=True, exist_ok=True)
+    n, k = model.n_fingers, model.n_joints
+    post = [r.posterior or r.prior for r in result.history]
+    hist = {"iteration": np.array([r.iteration for r in result.history]),
+            "mean": np.array([p.mean for p in post]),
+            "low": np.array([p.low for p in post]),
+            "high": np.array([p.high for p in post]),
+            "ess": np.array([r.ess for r in result.history]),
+            "ci_deg": np.array([r.ci_deg for r in result.history]),
+            "command": np.array([r.command for r in result.history]),
+            "seconds": np.array(result.seconds)}
+    if result.scores:
+        hist["theta_error_deg"] = np.array([s.theta_error_deg for s in result.scores])
+    fd, tmp = tempfile.mkstemp(prefix=".history.", suffix=".npz", dir=out)
+    os.close(fd)
+    np.savez_compressed(tmp, **hist)
+    os.replace(tmp, out / "history.npz")
+    _plot(out / "convergence.png", hist, model, n, k)
+    write_json_atomic(out / "result.json", summary)
+
+
+def _plot(path: Path, hist: dict, model, n: int, k: int) -> None:
+    import os
+    import tempfile
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    it = hist["iteration"]
+    fig, axes = plt.subplots(1, n, figsize=(4 * n, 3.2), squeeze=False)
+    for i, name in enumerate(model.names):
+        ax = axes[0, i]
+        j = i * k
+        ax.fill_between(it, np.degrees(hist["low"][:, j]), np.degrees(hist["high"][:, j]),
+                        alpha=0.3, label="95% interval")
+        ax.plot(it, np.degrees(hist["mean"][:, j]), label="estimate")
+        if "theta_error_deg" in hist:
+            # truth = estimate +- error: draw the truth from the signed record if known.
+            pass
+        ax.set_title(f"{name} proximal")
+        ax.set_xlabel("iteration")
+        ax.set_ylabel("angle [deg]")
+    axes[0, 0].legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    fd, tmp = tempfile.mkstemp(prefix=".convergence.", suffix=".png", dir=path.parent)
+    os.close(fd)
+    fig.savefig(tmp, dpi=110)
+    plt.close(fig)
+    os.replace(tmp, path)
+
+
+def format_table(result, summary: dict, model) -> str:
+    lines = [f"converged: {summary['converged']} after {summary['iterations']} iterations "
+             f"(criterion met at {summary['converged_at']})", "",
+             f"{'joint':16s} {'estimate [deg]':>15s} {'95% interval [deg]':>22s}"]
+    for name, e in result.theta.items():
+        lines.append(f"{name:16s} {np.degrees(e.mean):15.2f} "
+                     f"{np.degrees(e.low):10.2f} .. {np.degrees(e.high):7.2f}")
+    for name, e in result.unknowns.items():
+        lines.append(f"{name:24s} {e.mean:.5g}  [{e.low:.5g} .. {e.high:.5g}]")
+    if "errors" in summary:
+        err = summary["errors"]
+        lines.append("")
+        lines.append(f"errors vs truth: proximal {err['proximal_deg_mean']:.2f} deg, distal "
+                     f"{err['distal_deg_mean']:.2f} deg, contact "
+                     f"{err.get('contact_mm_mean', float('nan')):.2f} mm; coverage "
+                     f"{summary['coverage']:.2f}")
+    lines.append(f"filter: {summary['timing']['filter_s_per_iteration_median']:.3f} s per "
+                 "iteration (median)")
+    return "\n".join(lines)
