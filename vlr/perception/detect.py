@@ -182,7 +182,7 @@ def _refine_once(sample: Callable[[np.ndarray, np.ndarray], np.ndarray], quad: n
     opposite = np.stack([np.roll(quad, -2, axis=0), np.roll(quad, -3, axis=0)], axis=1)
     across = np.abs(np.einsum("kjc,kc->kj", opposite - a[:, None, :], n)).mean(axis=1)
     cell = across / _CELLS
-    if cell.min() < 3.0:  # too small for profiles that stay within one cell
+    if cell.min() < 2.5:  # too small for profiles that stay within one cell
         return None
     # The window stays on the tag's one-cell borders (black inside, white outside) with room
     # for the seed's error; 6 px holds a blur of sigma 1.5 px.

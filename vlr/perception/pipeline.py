@@ -109,8 +109,8 @@ def observe(image: np.ndarray | None, calibration: CameraCalibration, tag_id: in
     Returns None, never a stale or partial pose, when the image is None, empty or flat (e.g.
     black); no tag or only other ids are found; the id is found more than once; a corner lies
     within `border_margin_px` of the image edge (a tag partly out of view); the corners do
-    not refine (cells under 3 px, an edge largely hidden) unless `allow_unrefined`; the pose
-    is not finite or lies behind the camera; or the RMS reprojection error exceeds
+    not refine (cells under 2.5 px across, an edge largely hidden) unless `allow_unrefined`;
+    the pose is not finite or lies behind the camera; or the RMS reprojection error exceeds
     `max_reprojection_px`. (Four corners always fit a square closely, so the reprojection
     check only catches gross failures.)
 
