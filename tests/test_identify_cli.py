@@ -40,3 +40,18 @@ def test_identify_bad_input_is_one_clear_line(tmp_path, capsys):
     assert rc == 2
     assert "unknown backend 'nowhere'" in capsys.readouterr().err
     assert not (tmp_path / "result.json").exists()
+
+
+def test_identify_hardware_backend_against_emulated_motors_and_sim(tmp_path):
+    """The whole hardware path: SDK packets on a pty, emulated XM430s driving the MuJoCo hand,
+    its rendered frames through the fake camera, into the same filter."""
+    import models
+
+    config = models.ROOT.parent / "hardware" / "example_sim_config.yaml"
+    out = tmp_path / "hw"
+    rc = main(["identify", "--backend", "hardware", "--config", str(config), "--object",
+               "apple", "--particles", "800", "--max-iterations", "2", "--out", str(out),
+               "--quiet"])
+    assert rc == 0
+    result = json.loads((out / "result.json").read_text())
+    assert result["backend"] == "hardware" and "errors" not in result  # no truth on hardware
