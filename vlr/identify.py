@@ -21,11 +21,12 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from vlr.explore import ExplorationRange, random_action
 from vlr.filter import FilterConfig, IterationRecord, ParticleFilter
 from vlr.kinematics import HandModel, contact_in_distal, normals_from_angles
 from vlr.motion import ObjectParams
 from vlr.observation import PoseObservation
-from vlr.synthetic import NominalGrasp, Truth, random_action
+from vlr.synthetic import NominalGrasp, Truth
 
 __all__ = ["ActingWorld", "IdentifyConfig", "Estimate", "Score", "IdentifyResult", "identify"]
 
@@ -46,6 +47,8 @@ class IdentifyConfig:
         max_iterations: actions after the first observation.
         min_iterations: do not stop on convergence before this many actions.
         action_range: exploratory tendon-change magnitude range [m] (random sign).
+        action_band: commands stay within this distance of the grasp command [m]
+            (vlr.explore: a long random walk would slacken a tendon or crush the object).
         stop_on_convergence: stop once the 95% interval criterion holds (METHOD.md 3).
         filter: particle-filter settings.
         action_seed: seed of the action Generator (None: the filter's seed + 1).
@@ -54,6 +57,7 @@ class IdentifyConfig:
     max_iterations: int = 40
     min_iterations: int = 0
     action_range: tuple[float, float] = (0.2e-3, 0.4e-3)
+    action_band: float = 0.4e-3
     stop_on_convergence: bool = True
     filter: FilterConfig = field(default_factory=FilterConfig)
     action_seed: int | None = None
@@ -153,6 +157,9 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
     action_rng = np.random.default_rng(cfg.filter.seed + 1 if cfg.action_seed is None
                                        else cfg.action_seed)
     u = _commands(world.grasp())
+    center = u.copy()
+    explore = ExplorationRange(low=cfg.action_range[0], high=cfg.action_range[1],
+                               band=max(cfg.action_band, cfg.action_range[1]))
     obs = observer()
     while obs is None:  # the filter needs one pose to anchor its particles
         obs = observer()
@@ -177,7 +184,7 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
         if pf.converged and cfg.stop_on_convergence and it >= cfg.min_iterations:
             break
         it += 1
-        delta = random_action(action_rng, model.n_fingers, cfg.action_range)
+        delta = random_action(action_rng, u, center, explore)
         u = _commands(world.apply(delta))
         obs = observer()
         t0 = time.perf_counter()
