@@ -55,3 +55,21 @@ def test_identify_hardware_backend_against_emulated_motors_and_sim(tmp_path):
     assert rc == 0
     result = json.loads((out / "result.json").read_text())
     assert result["backend"] == "hardware" and "errors" not in result  # no truth on hardware
+
+
+def test_identify_gives_up_clearly_when_the_tag_is_never_seen():
+    import pytest
+
+    from vlr.hand import GraspError
+    from vlr.identify import IdentifyConfig, identify
+    from vlr.kinematics import HandModel
+    from vlr.motion import ObjectParams
+    from vlr.spec import load_hand, load_object
+    from vlr.synthetic import SyntheticConfig, SyntheticWorld, nominal_grasp
+
+    model = HandModel.from_spec(load_hand("modelo"))
+    obj = ObjectParams.from_spec(load_object("apple"))
+    world = SyntheticWorld(model, obj, SyntheticConfig(seed=0))
+    with pytest.raises(GraspError, match="not seen in 30 frames"):
+        identify(world, lambda: None, model, obj, nominal_grasp(model, obj, SyntheticConfig()),
+                 IdentifyConfig())

@@ -23,6 +23,7 @@ import numpy as np
 
 from vlr.explore import ExplorationRange, random_action
 from vlr.filter import FilterConfig, IterationRecord, ParticleFilter
+from vlr.hand import GraspError
 from vlr.kinematics import HandModel, contact_in_distal, normals_from_angles
 from vlr.motion import ObjectParams
 from vlr.observation import PoseObservation
@@ -52,12 +53,15 @@ class IdentifyConfig:
         stop_on_convergence: stop once the 95% interval criterion holds (METHOD.md 3).
         filter: particle-filter settings.
         action_seed: seed of the action Generator (None: the filter's seed + 1).
+        first_observation_frames: frames to wait for the first tag detection after the
+            grasp before giving up with a GraspError.
     """
 
     max_iterations: int = 40
     min_iterations: int = 0
     action_range: tuple[float, float] = (0.2e-3, 0.4e-3)
     action_band: float = 0.4e-3
+    first_observation_frames: int = 30
     stop_on_convergence: bool = True
     filter: FilterConfig = field(default_factory=FilterConfig)
     action_seed: int | None = None
@@ -161,8 +165,13 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
     explore = ExplorationRange(low=cfg.action_range[0], high=cfg.action_range[1],
                                band=max(cfg.action_band, cfg.action_range[1]))
     obs = observer()
+    tries = 1
     while obs is None:  # the filter needs one pose to anchor its particles
+        if tries >= cfg.first_observation_frames:
+            raise GraspError(f"the object's tag was not seen in {tries} frames after the "
+                             "grasp: check the camera, the tag id and size, and the lighting")
         obs = observer()
+        tries += 1
     scores: list[Score] = []
     seconds: list[float] = []
     t0 = time.perf_counter()
