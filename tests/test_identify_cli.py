@@ -19,6 +19,9 @@ def test_identify_synthetic_writes_result_history_and_plot(tmp_path):
     assert {"proximal_deg_mean", "distal_deg_mean", "contact_mm_mean"} <= set(result["errors"])
     hist = np.load(out / "history.npz")
     assert hist["mean"].shape[0] == 4  # the initial update plus three actions
+    # The plotted truth agrees with the scored error of the final iteration.
+    final_err = np.degrees(np.abs(hist["mean"][-1, :6] - hist["truth_theta"][-1]))
+    np.testing.assert_allclose(final_err, hist["theta_error_deg"][-1], atol=1e-9)
     assert (out / "convergence.png").stat().st_size > 1000
 
 
@@ -55,6 +58,7 @@ def test_identify_hardware_backend_against_emulated_motors_and_sim(tmp_path):
     assert rc == 0
     result = json.loads((out / "result.json").read_text())
     assert result["backend"] == "hardware" and "errors" not in result  # no truth on hardware
+    assert "truth_theta" not in np.load(out / "history.npz")
 
 
 def test_identify_gives_up_clearly_when_the_tag_is_never_seen():

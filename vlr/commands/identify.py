@@ -99,15 +99,12 @@ def run(args: argparse.Namespace) -> int:
                 bar.update(1)
 
     t0 = time.perf_counter()
-    _last_truth = None
-    if truth is not None and hand is not None:
-        def truth_and_keep():  # scoring only; read before the backend closes
-            nonlocal _last_truth
-            _last_truth = truth()
-            return _last_truth
-        scorer = truth_and_keep
-    else:
-        scorer = truth
+    truths: list = []  # one per scored iteration: for the plot and the final errors only
+    scorer = None
+    if truth is not None:
+        def scorer():  # scoring only; the filter never sees this
+            truths.append(truth())
+            return truths[-1]
     try:
         result = identify(world, observer, model, obj, nominal, cfg, truth=scorer,
                           progress=progress)
@@ -116,11 +113,9 @@ def run(args: argparse.Namespace) -> int:
             bar.close()
         if hand is not None:
             hand.close()
-    final_truth = None
-    if truth is not None:
-        final_truth = truth() if hand is None else _last_truth
+    final_truth = truths[-1] if truths else None
     summary = summarize(result, model, args, time.perf_counter() - t0, final_truth)
-    write_outputs(out, result, summary, model)
+    write_outputs(out, result, summary, model, truths)
     print(format_table(result, summary, model))
     print(f"\nwrote {out / 'result.json'}, {out / 'history.npz'}, {out / 'convergence.png'}")
     return 0
@@ -168,7 +163,7 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
     return out
 
 
-def write_outputs(out: Path, result, summary: dict, model) -> None:
+def write_outputs(out: Path, result, summary: dict, model, truths: list | None = None) -> None:
     """result.json, history.npz and convergence.png, each written atomically."""
     import os
     import tempfile
@@ -188,6 +183,8 @@ def write_outputs(out: Path, result, summary: dict, model) -> None:
             "seconds": np.array(result.seconds)}
     if result.scores:
         hist["theta_error_deg"] = np.array([s.theta_error_deg for s in result.scores])
+    if truths:
+        hist["truth_theta"] = np.array([t.theta.ravel() for t in truths])
     fd, tmp = tempfile.mkstemp(prefix=".history.", suffix=".npz", dir=out)
     os.close(fd)
     np.savez_compressed(tmp, **hist)
@@ -213,9 +210,8 @@ def _plot(path: Path, hist: dict, model, n: int, k: int) -> None:
         ax.fill_between(it, np.degrees(hist["low"][:, j]), np.degrees(hist["high"][:, j]),
                         alpha=0.3, label="95% interval")
         ax.plot(it, np.degrees(hist["mean"][:, j]), label="estimate")
-        if "theta_error_deg" in hist:
-            # truth = estimate +- error: draw the truth from the signed record if known.
-            pass
+        if "truth_theta" in hist:
+            ax.plot(it, np.degrees(hist["truth_theta"][:, j]), "k--", label="ground truth")
         ax.set_title(f"{name} proximal")
         ax.set_xlabel("iteration")
         ax.set_ylabel("angle [deg]")
