@@ -142,7 +142,9 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
              model: HandModel, obj: ObjectParams, nominal: NominalGrasp,
              config: IdentifyConfig | None = None,
              truth: Callable[[], Truth] | None = None,
-             progress: Callable[[IterationRecord], None] | None = None) -> IdentifyResult:
+             progress: Callable[[IterationRecord], None] | None = None,
+             watch: Callable[[ParticleFilter, IterationRecord], None] | None = None,
+             ) -> IdentifyResult:
     """Run Algorithm 1: grasp -> observe -> (act -> observe -> update)* until converged.
 
     Args:
@@ -155,6 +157,8 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
         config: loop settings.
         truth: ground truth callable for SCORING ONLY.
         progress: called with each IterationRecord (e.g. a progress bar).
+        watch: called with the filter and each IterationRecord after the update (e.g. a
+            live 3D view of the particles); it must not change the filter.
     """
     cfg = config or IdentifyConfig()
     pf = ParticleFilter(model, obj, cfg.filter)
@@ -184,6 +188,8 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
             scores.append(_score(pf, rec, truth()))
         if progress is not None:
             progress(rec)
+        if watch is not None:
+            watch(pf, rec)
 
     after(rec)
     it = 0
