@@ -2,8 +2,11 @@
 
 Writes into --out: `result.json` (errors against ground truth where the backend has one,
 coverage, timing), `history.npz` (per-iteration posterior means, 95% bounds, ESS, and the
-truth when known) and `convergence.png` (per proximal joint: estimate, 95% band and truth
-against iteration, like the paper's Fig. 4C).
+truth when known), `convergence.png` (per proximal joint: estimate, 95% band and truth
+against iteration, like the paper's Fig. 4C) and `particles.png` (the particle cloud at a few
+iterations, `vlr.plots`). `--view` serves a live 3D view of the hypotheses and `--view-html`
+saves its final scene as a standalone page (`vlr.view`, docs/VIEW.md); neither costs
+anything unless asked for.
 """
 
 from __future__ import annotations
@@ -32,7 +35,45 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", help="hardware backend: the hardware YAML file")
     p.add_argument("--out", default="runs/identify", help="output folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
+    p.add_argument("--view", action="store_true", help="serve a live 3D view of the particle "
+                   "filter (meshcat; prints its URL)")
+    p.add_argument("--view-html", metavar="FILE", help="save the final 3D scene as a "
+                   "standalone HTML page")
+    p.add_argument("--cloud-at", type=_iterations, metavar="I,J,...",
+                   help="iterations drawn in particles.png (default: 4 from first to last)")
     p.set_defaults(func=run)
+
+
+def _iterations(text: str) -> list[int]:
+    try:
+        its = [int(t) for t in text.split(",") if t.strip()]
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is not a list of iterations, e.g. 0,5,10") from None
+    if not its or min(its) < 0:
+        raise argparse.ArgumentTypeError(f"{text!r}: give iterations >= 0, e.g. 0,5,10")
+    return its
+
+
+def _open_view(args: argparse.Namespace, model, hand_spec, obj_spec, truth):
+    """The live view (`vlr.view`), only when asked for: meshcat is not even imported else."""
+    from vlr.view import FilterView
+
+    view = FilterView(model, obj=obj_spec, seed=args.seed, truth=truth,
+                      palm_radius=hand_spec.palm_radius,
+                      palm_thickness=hand_spec.palm_thickness)
+    if args.view:
+        print(f"view: {view.url}", flush=True)
+    return view
+
+
+def _finish_view(view, args: argparse.Namespace) -> None:
+    import sys
+
+    if args.view_html:
+        print(f"wrote {view.save_html(args.view_html)}")
+    if args.view and sys.stdin.isatty():  # keep serving the final scene until the user is done
+        input("view: press Enter to stop the viewer ")
 
 
 def run(args: argparse.Namespace) -> int:
@@ -41,6 +82,7 @@ def run(args: argparse.Namespace) -> int:
     from vlr.identify import IdentifyConfig, identify
     from vlr.kinematics import HandModel
     from vlr.motion import ObjectParams
+    from vlr.plots import CloudRecorder, particle_cloud
     from vlr.spec import load_hand, load_object
     from vlr.synthetic import SyntheticConfig, SyntheticWorld, nominal_grasp
 
@@ -98,6 +140,13 @@ def run(args: argparse.Namespace) -> int:
             if rec.iteration:
                 bar.update(1)
 
+    cloud = CloudRecorder(seed=args.seed)  # a small sample per iteration, for particles.png
+    watchers: list = [cloud]
+
+    def watch(pf, rec) -> None:
+        for w in watchers:
+            w(pf, rec)
+
     t0 = time.perf_counter()
     truths: list = []  # one per scored iteration: for the plot and the final errors only
     scorer = None
@@ -105,10 +154,21 @@ def run(args: argparse.Namespace) -> int:
         def scorer():  # scoring only; the filter never sees this
             truths.append(truth())
             return truths[-1]
+    view = None
     try:
+        if args.view or args.view_html:
+            view = _open_view(args, model, hand_spec, obj_spec, truth)
+            observer = view.observing(observer)
+            watchers.append(view)
         result = identify(world, observer, model, obj, nominal, cfg, truth=scorer,
-                          progress=progress)
+                          progress=progress, watch=watch)
+        if view is not None:
+            if bar is not None:
+                bar.close()
+            _finish_view(view, args)
     finally:
+        if view is not None:
+            view.close()  # always stop the meshcat server
         if bar is not None:
             bar.close()
         if hand is not None:
@@ -116,8 +176,13 @@ def run(args: argparse.Namespace) -> int:
     final_truth = truths[-1] if truths else None
     summary = summarize(result, model, args, time.perf_counter() - t0, final_truth)
     write_outputs(out, result, summary, model, truths)
+    truth_at = ({r.iteration: t.theta for r, t in zip(result.history, truths, strict=True)}
+                if truths else None)
+    particle_cloud(out / "particles.png", cloud.snapshots, model.names,
+                   [i for i in args.cloud_at or () if i in cloud.snapshots] or None, truth_at)
     print(format_table(result, summary, model))
-    print(f"\nwrote {out / 'result.json'}, {out / 'history.npz'}, {out / 'convergence.png'}")
+    print(f"\nwrote {out / 'result.json'}, {out / 'history.npz'}, {out / 'convergence.png'}, "
+          f"{out / 'particles.png'}")
     return 0
 
 
