@@ -87,8 +87,8 @@ class MotionConfig:
     limit_stiffness: float = 100.0
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     max_iter: int = 30
-    tol_theta: float = 1e-8
-    tol_pos: float = 1e-9
+    tol_theta: float = 1e-6
+    tol_pos: float = 1e-7
     max_step_theta: float = 0.1
     max_step_pos: float = 0.005
     jump_theta: float = 0.25
