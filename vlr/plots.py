@@ -185,8 +185,8 @@ def boxplots(rows: Iterable[Mapping[str, Any]], path: str | Path) -> Path:
     for ax, (key, axis_label) in zip(axes[0], metrics, strict=True):
         data = [groups[lab].get(key, []) for lab in labels]
         pos = [i + 1 for i, d in enumerate(data) if d]
-        ax.boxplot([d for d in data if d], positions=pos, widths=0.6)
-        for p, d in zip(pos, [d for d in data if d], strict=True):  # the trials themselves
+        ax.boxplot([d for d in data if d], positions=pos, widths=0.6, showfliers=False)
+        for p, d in zip(pos, [d for d in data if d], strict=True):  # every trial, fliers too
             ax.plot(np.full(len(d), p), d, ".", color="0.3", alpha=0.6)
         ax.set_xticks(range(1, len(labels) + 1), labels, fontsize=7)
         ax.set_xlim(0.4, len(labels) + 0.6)

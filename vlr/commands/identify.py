@@ -156,33 +156,34 @@ def run(args: argparse.Namespace) -> int:
             return truths[-1]
     view = None
     try:
-        if args.view or args.view_html:
-            view = _open_view(args, model, hand_spec, obj_spec, truth)
-            observer = view.observing(observer)
-            watchers.append(view)
-        result = identify(world, observer, model, obj, nominal, cfg, truth=scorer,
-                          progress=progress, watch=watch)
-        if view is not None:
+        try:
+            if args.view or args.view_html:
+                view = _open_view(args, model, hand_spec, obj_spec, truth)
+                observer = view.observing(observer)
+                watchers.append(view)
+            result = identify(world, observer, model, obj, nominal, cfg, truth=scorer,
+                              progress=progress, watch=watch)
+        finally:
             if bar is not None:
                 bar.close()
+            if hand is not None:
+                hand.close()
+        final_truth = truths[-1] if truths else None
+        summary = summarize(result, model, args, time.perf_counter() - t0, final_truth)
+        write_outputs(out, result, summary, model, truths)
+        truth_at = ({r.iteration: t.theta for r, t in zip(result.history, truths, strict=True)}
+                    if truths else None)
+        particle_cloud(out / "particles.png", cloud.snapshots, model.names,
+                       [i for i in args.cloud_at or () if i in cloud.snapshots] or None,
+                       truth_at)
+        print(format_table(result, summary, model))
+        print(f"\nwrote {out / 'result.json'}, {out / 'history.npz'}, "
+              f"{out / 'convergence.png'}, {out / 'particles.png'}")
+        if view is not None:  # after the results are safe on disk
             _finish_view(view, args)
     finally:
         if view is not None:
             view.close()  # always stop the meshcat server
-        if bar is not None:
-            bar.close()
-        if hand is not None:
-            hand.close()
-    final_truth = truths[-1] if truths else None
-    summary = summarize(result, model, args, time.perf_counter() - t0, final_truth)
-    write_outputs(out, result, summary, model, truths)
-    truth_at = ({r.iteration: t.theta for r, t in zip(result.history, truths, strict=True)}
-                if truths else None)
-    particle_cloud(out / "particles.png", cloud.snapshots, model.names,
-                   [i for i in args.cloud_at or () if i in cloud.snapshots] or None, truth_at)
-    print(format_table(result, summary, model))
-    print(f"\nwrote {out / 'result.json'}, {out / 'history.npz'}, {out / 'convergence.png'}, "
-          f"{out / 'particles.png'}")
     return 0
 
 
