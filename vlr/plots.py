@@ -65,6 +65,7 @@ def _save(fig: Any, path: Path, dpi: int = 110) -> Path:
     os.close(fd)
     try:
         fig.savefig(tmp, dpi=dpi)
+        os.chmod(tmp, 0o644)  # mkstemp makes 0600; a picture is for sharing
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
@@ -120,6 +121,7 @@ def particle_cloud(path: str | Path, snapshots: Mapping[int, np.ndarray],
                 ax.plot(t[0], t[-1], "X", markerfacecolor=col, markeredgecolor="k",
                         markeredgewidth=0.8, markersize=10)
         ax.set_title(name)
+        ax.xaxis.set_major_locator(plt.MaxNLocator(5))  # a narrow cloud's labels collide
         ax.set_xlabel("proximal [deg]")
         ax.set_ylabel("distal [deg]")
     handles, labels = axes[0, 0].get_legend_handles_labels()

@@ -372,6 +372,7 @@ class FilterView:
         try:
             with os.fdopen(fd, "w", encoding="utf-8") as f:
                 f.write(html)
+            os.chmod(tmp, 0o644)  # a page to share: mkstemp's 0600 would hide it
             os.replace(tmp, path)
         except BaseException:
             if os.path.exists(tmp):
