@@ -260,6 +260,7 @@ class FilterView:
             vis["pom/observed"].set_transform(_pose_matrix(
                 np.asarray(observation.position, float), np.asarray(observation.rotation,
                                                                      float)))
+            self._show("pom")
         # The hand: where it really is when known, else the identified (mean) hand.
         if truth is not None:
             theta, segments = np.asarray(truth.theta), np.asarray(truth.segments)
@@ -276,12 +277,19 @@ class FilterView:
             vis[f"hand/pad{i}"].set_transform(_pose_matrix(p, np.eye(3)))
         if pose is not None and self.obj is not None:
             vis["object"].set_transform(_pose_matrix(*pose))
+            self._show("object")
         if not self._camera_set:
             # Midway between the palm and the grasp, a little up: the object sits above.
             centre = 0.5 * (h.contacts.mean(axis=0) + m.base_pos.mean(axis=0))
             centre[2] += 0.015
             self._aim_camera(centre)
         self.iteration = iteration
+
+    def _show(self, path: str) -> None:
+        """Show a node hidden until it had a pose (else it would sit at the palm origin)."""
+        if path in self._hidden:
+            self._root[path].set_property("visible", True)
+            self._hidden.discard(path)
 
     def _lines(self, path: str, segments: np.ndarray, rgb: Sequence[float]) -> None:
         g = self._g
@@ -321,6 +329,9 @@ class FilterView:
         vis["pom/observed"].set_object(g.triad(0.02))
         if self.obj is not None:
             vis["object/shape"].set_object(*self._object_shape())
+        self._hidden = {"pom", "object"}
+        for path in self._hidden:
+            vis[path].set_property("visible", False)
 
     def _object_shape(self) -> tuple[Any, Any]:
         """The object's primitive in O (origin at the tag, z into the object). Translucent,
