@@ -1,0 +1,160 @@
+"""The Jacobian controller (Eq. 10-12): pose errors, the two step rules, the numerical
+Jacobian of the motion model, the camera-fitted correction, and the closed loop on the
+synthetic world (where the model is the world, so the VLR's Jacobian is right)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from vlr.controller import (
+    ControllerConfig,
+    JacobianController,
+    dls_step,
+    numerical_jacobian,
+    observed_motion,
+    pose_error,
+    reach,
+    rotation_log,
+    row_weights,
+    transpose_step,
+)
+from vlr.observation import PomObservation
+
+
+def test_rotation_log_matches_scipy_including_small_and_near_pi_angles():
+    rng = np.random.default_rng(0)
+    vecs = [rng.normal(size=3) for _ in range(20)]
+    vecs += [np.array([1e-9, -2e-9, 3e-9]), np.array([0.0, 0.0, np.pi - 1e-9]),
+             np.array([np.pi, 0.0, 0.0]) * (1 - 1e-12)]
+    for v in vecs:
+        v = v if np.linalg.norm(v) <= np.pi else v / np.linalg.norm(v) * 3.0
+        r = Rotation.from_rotvec(v).as_matrix()
+        got = rotation_log(r)
+        # near pi the axis sign is ambiguous: compare the rotations, not the vectors
+        np.testing.assert_allclose(Rotation.from_rotvec(got).as_matrix(), r, atol=1e-7)
+        if np.linalg.norm(v) < 3.0:
+            np.testing.assert_allclose(got, v, atol=1e-9)
+
+
+def test_pose_error_is_target_minus_current_in_the_palm_frame():
+    r0 = Rotation.from_rotvec([0.1, -0.2, 0.3]).as_matrix()
+    w = np.array([0.01, 0.02, -0.03])
+    r1 = Rotation.from_rotvec(w).as_matrix() @ r0    # a spatial rotation of r0
+    e = pose_error([0.0, 0.0, 0.06], r0, [0.001, -0.002, 0.06], r1)
+    np.testing.assert_allclose(e[:3], [0.001, -0.002, 0.0], atol=1e-15)
+    np.testing.assert_allclose(e[3:], w, atol=1e-12)
+    np.testing.assert_allclose(pose_error(np.zeros(3), r0, np.ones(3), None)[3:], 0.0)
+    a = PomObservation(np.zeros(3), r0)
+    b = PomObservation(np.array([0.0, 0.001, 0.0]), r1)
+    np.testing.assert_allclose(observed_motion(a, b), [0, 0.001, 0, *w], atol=1e-12)
+
+
+def test_weights_of_eq12_are_per_mm_and_alpha_per_degree():
+    w = row_weights("full", alpha=9.5)
+    np.testing.assert_allclose(w[:3], 1e3)
+    np.testing.assert_allclose(w[3:], 9.5 / np.radians(1.0))
+    assert row_weights("position").shape == (3,) and row_weights("orientation").shape == (3,)
+
+
+def test_step_rules_reduce_the_error_of_a_linear_plant():
+    rng = np.random.default_rng(1)
+    jac = rng.normal(size=(3, 3)) * 5.0 + np.eye(3) * 8.0
+    target = np.array([0.3, -0.2, 0.1])
+    for rule in ("transpose", "dls"):
+        x = np.zeros(3)
+        norms = []
+        for _ in range(60):
+            e = target - jac @ x
+            norms.append(np.linalg.norm(e))
+            x = x + (transpose_step(jac, e) if rule == "transpose"
+                     else dls_step(jac, e, damping=1e-3))
+        assert norms[-1] < 1e-3 * norms[0], rule
+    # DLS with vanishing damping is the exact solve on a square, well-conditioned J
+    e = rng.normal(size=3)
+    np.testing.assert_allclose(dls_step(jac, e, 1e-9), np.linalg.solve(jac, e), rtol=1e-6)
+
+
+def test_step_scales_the_whole_change_to_the_step_limit_and_keeps_its_direction():
+    ctl = JacobianController(ControllerConfig(rows="position", method="dls", damping=1e-6,
+                                              gain=1.0, max_step=0.2e-3))
+    jac = np.zeros((6, 3))
+    jac[:3] = np.eye(3) * 2.0                    # 2 mm of POM per mm of tendon
+    du = ctl.step(jac, np.array([0.004, -0.002, 0.0, 0, 0, 0]))   # wants (2, -1, 0) mm
+    np.testing.assert_allclose(du, [0.2e-3, -0.1e-3, 0.0], atol=1e-12)
+
+
+def test_config_rejects_unknown_rows_and_methods():
+    with pytest.raises(ValueError, match="rows"):
+        ControllerConfig(rows="yaw")
+    with pytest.raises(ValueError, match="method"):
+        ControllerConfig(method="newton")
+
+
+def test_secant_fit_and_update_recover_a_linear_map_the_vlr_misses():
+    rng = np.random.default_rng(2)
+    true = rng.normal(size=(6, 3)) * 4.0
+    d = rng.uniform(-0.4e-3, 0.4e-3, (15, 3))
+    ctl = JacobianController(ControllerConfig(secant=True))
+    ctl.fit(d, d @ true.T, jacobian=np.zeros((6, 3)))   # a VLR that sees no motion at all
+    np.testing.assert_allclose(ctl.jacobian, true, rtol=1e-4, atol=1e-4)
+    # Broyden updates learn the map along the moves made
+    ctl = JacobianController(ControllerConfig(secant=True))
+    ctl.fit(np.zeros((0, 3)), np.zeros((0, 6)), jacobian=np.zeros((6, 3)))
+    for _ in range(60):
+        du = rng.uniform(-0.3e-3, 0.3e-3, 3)
+        ctl.learn(du, true @ du)
+    np.testing.assert_allclose(ctl.jacobian, true, atol=1e-3 * np.abs(true).max())
+    off = JacobianController(ControllerConfig(secant=False))
+    off.fit(d, d @ true.T, jacobian=np.zeros((6, 3)))
+    assert off.correction is None and np.all(off.jacobian == 0)
+
+
+@pytest.fixture(scope="module")
+def identified_synthetic():
+    """A synthetic world and a filter identified on it (small, quick)."""
+    from vlr.filter import FilterConfig
+    from vlr.identify import IdentifyConfig, identify
+    from vlr.kinematics import HandModel
+    from vlr.motion import ObjectParams
+    from vlr.spec import load_hand, load_object
+    from vlr.synthetic import SyntheticConfig, SyntheticWorld
+
+    model = HandModel.from_spec(load_hand("modelo"))
+    obj = ObjectParams.from_spec(load_object("apple"))
+    world = SyntheticWorld(model, obj, SyntheticConfig(seed=0))
+    box = {}
+    identify(world, world.observe, model, obj, world.nominal,
+             IdentifyConfig(max_iterations=12, filter=FilterConfig(n_particles=1500, seed=0)),
+             watch=lambda pf, rec: box.update(pf=pf))
+    return world, box["pf"]
+
+
+def test_numerical_jacobian_predicts_the_worlds_motion(identified_synthetic):
+    world, _ = identified_synthetic
+    state = world.state.copy()
+    jac = numerical_jacobian(world.motion, state, world.commands, n_particles=1)
+    assert jac.shape == (6, 3)
+    np.testing.assert_array_equal(state.pos, world.state.pos)   # the state is not changed
+    du = np.array([0.05e-3, -0.03e-3, 0.04e-3])
+    p0, r0 = world.state.pos[0].copy(), world.state.rot[0].copy()
+    world.apply(du)
+    moved = pose_error(p0, r0, world.state.pos[0], world.state.rot[0])
+    world.apply(-du)
+    np.testing.assert_allclose(jac @ du, moved, atol=0.1 * np.abs(moved).max())
+
+
+@pytest.mark.parametrize("method", ["dls", "transpose"])
+def test_reach_brings_the_pom_to_a_target_on_the_synthetic_world(identified_synthetic, method):
+    world, pf = identified_synthetic
+    start = world.observe()
+    target = start.position + np.array([0.3e-3, -0.2e-3, 0.0])
+    ctl = JacobianController(ControllerConfig(rows="position", method=method,
+                                              tolerance_pos=0.12e-3, max_steps=25))
+    result = reach(world, world.observe, pf, target, None, ctl)
+    assert result.reached, (method, result.error)
+    true_error = np.linalg.norm(world.truth().position - target)
+    assert true_error < 0.25e-3
+    # back to the start, so the second method starts from the same place
+    reach(world, world.observe, pf, start.position, None, ctl)
