@@ -1,0 +1,89 @@
+"""The VLR baseline policy: the Jacobian controller (Eq. 10-12) on the env's identified VLR.
+
+    env = gymnasium.make("vlr/Handwriting-v0")
+    obs, info = env.reset(seed=0)
+    policy = VLRBaseline(env)
+    while True:
+        obs, reward, terminated, truncated, info = env.step(policy(obs))
+        if terminated or truncated:
+            break
+
+Each call: retake the Jacobian on the env's particle filter at the current commands
+(`vlr.controller.numerical_jacobian`), compute the error from the latest camera pose to the
+current target, and return the step (transpose or damped least squares, rows and alpha as
+the task sets them in `controller_config`). With `secant` on (the tasks' default, ours), a
+correction of the VLR's Jacobian is fitted to the camera's view of the identification's own
+exploratory moves at the first call of an episode, then updated after every move
+(`JacobianController.fit`, `.learn`); with it off the policy is the paper's controller alone.
+The policy reads tendon commands, camera poses and the filter only: never ground truth.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from vlr.controller import ControllerConfig, JacobianController, numerical_jacobian
+from vlr.controller import observed_motion as _motion
+
+__all__ = ["VLRBaseline"]
+
+
+class VLRBaseline:
+    """Callable policy: observation -> tendon change [m] (module docstring).
+
+    Args:
+        env: a task env (or a wrapper of one).
+        config: controller settings (default: the task's `controller_config`).
+        **changes: fields of the config to change (e.g. method="transpose", secant=False).
+    """
+
+    def __init__(self, env: Any, config: ControllerConfig | None = None,
+                 **changes: Any) -> None:
+        self.env = env.unwrapped
+        cfg = config or self.env.controller_config
+        self.config = replace(cfg, **changes) if changes else cfg
+        self._episode = -1
+        self.controller = JacobianController(self.config)
+        self._seen = 0
+
+    def _new_episode(self) -> None:
+        env = self.env
+        self.controller = JacobianController(self.config)
+        try:
+            jac = numerical_jacobian(env.pf.motion, env.pf.state, env.commands,
+                                     self.config.jacobian_eps, self.config.jacobian_particles)
+        except FloatingPointError:  # no particle solves here: the camera's fit alone
+            jac = np.zeros((6, 3))
+        deltas, motions = self._pairs(env.moves)
+        self.controller.fit(deltas, motions, jac)
+        self._seen = len(env.moves)
+        self._episode = env.episode
+
+    @staticmethod
+    def _pairs(moves) -> tuple[np.ndarray, np.ndarray]:
+        d, m = [], []
+        for a, b in zip(moves[:-1], moves[1:], strict=True):
+            du = b.commands - a.commands
+            if a.observation is None or b.observation is None or np.max(np.abs(du)) < 1e-7:
+                continue
+            d.append(du)
+            m.append(_motion(a.observation, b.observation))
+        return np.reshape(d, (-1, 3)), np.reshape(m, (-1, 6))
+
+    def __call__(self, observation: Any = None) -> np.ndarray:
+        env = self.env
+        if self._episode != env.episode:
+            self._new_episode()
+        else:
+            # Learn from the moves made since the last call (the camera's view of them).
+            new = env.moves[max(self._seen - 1, 0):]
+            for du, dm in zip(*self._pairs(new), strict=True):
+                self.controller.learn(du, dm)
+            self._seen = len(env.moves)
+        pos, rot = env.target
+        du = self.controller.act(env.pf.motion, env.pf.state, env.commands, env.observation,
+                                 pos, rot)
+        return np.clip(du, env.action_space.low, env.action_space.high)

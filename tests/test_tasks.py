@@ -1,0 +1,105 @@
+"""The task environments: registration, gymnasium's env checker, same-seed determinism,
+rendering, a short baseline episode per task, and `vlr task` writing its files.
+
+Environments are made small (a few hundred particles, two identification iterations) so
+that the many resets of `check_env` stay quick; the seeded handwriting regression uses the
+defaults of `vlr task` on one letter."""
+
+from __future__ import annotations
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import tasks
+from tasks.letters import STROKES, letter_waypoints
+
+QUICK = {"particles": 1000, "identify_iterations": 1}
+
+
+def test_letters_are_single_strokes_with_bounded_spacing():
+    for ch in "SCIEN":
+        pts = letter_waypoints(ch, 0.003, 0.001)
+        steps = np.linalg.norm(np.diff(pts, axis=0), axis=1)
+        assert steps.max() <= 0.001 + 1e-12
+        assert np.abs(pts[:, 1]).max() <= 0.0015 + 1e-12
+    with pytest.raises(ValueError, match="not in the font"):
+        letter_waypoints("#", 0.003, 0.001)
+    assert set("SCIEN") <= set(STROKES)
+
+
+def test_environments_are_registered_under_one_namespace():
+    for env_id in tasks.ENVIRONMENTS:
+        assert env_id.startswith("vlr/") and env_id in gym.registry
+
+
+def test_handwriting_passes_the_env_checker():
+    env = gym.make(tasks.HANDWRITING, word="I", render_mode="rgb_array", **QUICK)
+    try:
+        check_env(env.unwrapped)
+        env.reset(seed=1)
+        frame = env.render()
+        assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
+    finally:
+        env.close()
+
+
+def _rollout(env_id: str, seed: int, actions: np.ndarray, **kwargs):
+    env = gym.make(env_id, **QUICK, **kwargs)
+    try:
+        obs, info = env.reset(seed=seed)
+        out = [(obs, 0.0, info)]
+        for a in actions:
+            obs, reward, terminated, truncated, info = env.step(a)
+            out.append((obs, reward, info))
+            if terminated or truncated:
+                break
+        return out
+    finally:
+        env.close()
+
+
+def _same(a, b) -> bool:
+    if isinstance(a, dict):
+        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
+    if isinstance(a, (list, tuple)):
+        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
+    return bool(np.array_equal(np.asarray(a), np.asarray(b)))
+
+
+def test_handwriting_is_deterministic_for_a_seed():
+    actions = np.array([[1e-4, -1e-4, 0.5e-4], [-2e-4, 1e-4, 1e-4], [0.0, 0.0, -1e-4]])
+    a = _rollout(tasks.HANDWRITING, 3, actions, word="I")
+    b = _rollout(tasks.HANDWRITING, 3, actions, word="I")
+    assert _same(a, b)
+    assert "truth" in a[-1][2] and a[-1][1] <= 0.0   # sim ground truth in info; reward <= 0
+
+
+def test_handwriting_episode_one_letter_seeded_regression(tmp_path):
+    """The VLR baseline writes an 'I' (2 scored waypoints) through `vlr task`; seed 0's
+    error is pinned loosely (the sim and filter are deterministic; the bound leaves room for
+    the identification's ongoing changes)."""
+    from vlr.cli import main
+
+    out = tmp_path / "hw"
+    rc = main(["task", "handwriting", "--seed", "0", "--particles", "2000", "--quiet",
+               "--option", "word=I", "--out", str(out)])
+    assert rc == 0
+    result = json.loads((out / "result.json").read_text())
+    assert (out / "task.png").stat().st_size > 1000
+    e = result["errors"]
+    assert {"position_mm_mean", "position_mm_sd"} <= e.keys()
+    assert result["waypoints_scored"] == 2 and not result["grasp_lost"]
+    assert e["position_mm_mean"] < 0.3, e
+
+
+def test_task_command_rejects_unknown_tasks_and_options(tmp_path, capsys):
+    from vlr.cli import main
+
+    assert main(["task", "juggling", "--out", str(tmp_path)]) == 2
+    assert "unknown task" in capsys.readouterr().err
+    assert main(["task", "handwriting", "--option", "nonsense", "--out", str(tmp_path)]) == 2
+    assert "KEY=VALUE" in capsys.readouterr().err
