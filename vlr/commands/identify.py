@@ -32,6 +32,18 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--unknown", action="append", default=[],
                    help="extra unknown, e.g. stiffness:thumb.distal or length:left.proximal")
     p.add_argument("--max-iterations", type=int, default=40)
+    p.add_argument("--min-iterations", type=int, default=0,
+                   help="do not stop on convergence before this many actions")
+    p.add_argument("--true-stiffness", action="append", default=[], type=_assignment,
+                   metavar="FINGER.JOINT=K", help="synthetic world only: a true spring rate "
+                   "[N m/rad]; an unknown stiffness without one is drawn (vlr.trial)")
+    p.add_argument("--sigma-pos-mm", type=float, help="likelihood position scale [mm] "
+                   "(default per backend: vlr.trial.DEFAULT_SIGMA)")
+    p.add_argument("--sigma-rot-deg", type=float, help="likelihood rotation scale [deg]")
+    p.add_argument("--nominal-theta-deg", type=float, nargs="+", metavar="DEG",
+                   help="your guess of the grasp's joint angles, one per joint (every finger)")
+    p.add_argument("--prior-spread-deg", type=float, default=3.0,
+                   help="prior std of the joint angles about the nominal grasp [deg]")
     p.add_argument("--config", help="hardware backend: the hardware YAML file")
     p.add_argument("--out", default="runs/identify", help="output folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -42,6 +54,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--cloud-at", type=_iterations, metavar="I,J,...",
                    help="iterations drawn in particles.png (default: 4 from first to last)")
     p.set_defaults(func=run)
+
+
+def _assignment(text: str) -> tuple[str, float]:
+    key, sep, value = text.partition("=")
+    try:
+        if not sep:
+            raise ValueError
+        return key.strip(), float(value)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: use FINGER.JOINT=VALUE, e.g. thumb.distal=0.045") from None
 
 
 def _iterations(text: str) -> list[int]:
@@ -77,57 +100,28 @@ def _finish_view(view, args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from vlr.cli import open_backend
-    from vlr.filter import FilterConfig
-    from vlr.identify import IdentifyConfig, identify
-    from vlr.kinematics import HandModel
-    from vlr.motion import ObjectParams
+    from vlr.identify import identify
     from vlr.plots import CloudRecorder, particle_cloud
-    from vlr.spec import load_hand, load_object
-    from vlr.synthetic import SyntheticConfig, SyntheticWorld, nominal_grasp
+    from vlr.trial import TrialSettings, identify_config, open_world
 
-    if args.particles < 10:
-        raise UserError(f"--particles {args.particles} must be >= 10")
-    if args.max_iterations < 1:
-        raise UserError(f"--max-iterations {args.max_iterations} must be >= 1")
     out = Path(args.out)
-    hand_spec = load_hand(args.hand)
-    obj_spec = load_object(args.object)
-    model = HandModel.from_spec(hand_spec)
-    obj = ObjectParams.from_spec(obj_spec)
+    settings = TrialSettings(
+        backend=args.backend, object=args.object, hand=args.hand, true_hand=args.true_hand,
+        particles=args.particles, seed=args.seed, unknowns=tuple(args.unknown),
+        true_stiffness=dict(args.true_stiffness), max_iterations=args.max_iterations,
+        min_iterations=args.min_iterations, sigma_pos_mm=args.sigma_pos_mm,
+        sigma_rot_deg=args.sigma_rot_deg, config=args.config,
+        nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg)
+    w = open_world(settings)
+    hand = w.hand
     try:
-        fcfg = FilterConfig(n_particles=args.particles, seed=args.seed,
-                            unknowns=tuple(args.unknown))
-        from vlr.filter import parse_unknown
-
-        for u in args.unknown:
-            parse_unknown(u, model)
-    except (ValueError, KeyError) as exc:
-        raise UserError(f"--unknown: {exc}") from None
-    cfg = IdentifyConfig(max_iterations=args.max_iterations, filter=fcfg)
-    nominal = nominal_grasp(model, obj, SyntheticConfig())
-    hand = None
-    if args.backend == "synthetic":
-        true_model = HandModel.from_spec(load_hand(args.true_hand)) if args.true_hand else model
-        world = SyntheticWorld(true_model, obj, SyntheticConfig(seed=args.seed),
-                               nominal_model=model)
-        observer, truth = world.observe, world.truth
-    else:
-        from vlr.perception import observe
-
-        options = {"config": args.config} if args.config else {}
-        hand = open_backend(args.backend, object=args.object, hand=args.hand,
-                            seed=args.seed, **options)
-        world = hand
-        spec = hand.object_spec
-
-        def observer():
-            frame = hand.grab_frame()
-            if frame is None:
-                return None
-            return observe(frame.image, hand.calibration, spec.tag_id, spec.tag_size)
-
-        truth = getattr(hand, "scoring_truth", None)  # sim only; never given to the filter
+        cfg = identify_config(settings, w.model)
+    except UserError:
+        w.close()
+        raise
+    world, observer, truth = w.world, w.observer, w.truth
+    model, obj, nominal = w.model, w.obj, w.nominal
+    hand_spec, obj_spec = w.hand_spec, w.object_spec
     bar = None
     if not args.quiet:
         from tqdm import tqdm
@@ -215,12 +209,13 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
         lengths, stiff = {}, {}
         for spec, e in s.unknown_error.items():
             kind, _, rest = spec.partition(":")
-            if kind == "length":
-                lengths[rest.split(".")[0]] = abs(e) * 1e3
+            if kind == "length":  # a finger's mean over its unknown lengths
+                lengths.setdefault(rest.split(".")[0], []).append(abs(e) * 1e3)
+                errors.setdefault("link_length_mm_by_joint", {})[rest] = abs(e) * 1e3
             elif kind == "stiffness":
                 stiff[rest] = abs(e)
         if lengths:
-            errors["link_length_mm"] = lengths
+            errors["link_length_mm"] = {f: float(np.mean(v)) for f, v in lengths.items()}
         if stiff:
             errors["stiffness"] = stiff
         out["errors"] = errors

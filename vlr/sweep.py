@@ -1,0 +1,350 @@
+"""Sweeps: many identification trials (objects x hands x unknowns x seeds x settings), each
+result streamed into its own file, and one table rebuilt from those files.
+
+A sweep is a YAML file (or the equivalent `vlr sweep` flags):
+
+    name: synthetic-identification     # optional, for the table's title
+    out: runs/sweep-synthetic          # output folder
+    seeds: [0, 1, 2, 3, 4]             # or "0-4"
+    settings: {backend: synthetic, particles: 60000}   # common to every trial
+    cases:                             # optional list of named setting overrides
+      - {name: known hand}
+      - {name: thumb distal stiffness, unknowns: [stiffness:thumb.distal]}
+    grid: {object: [apple, wine_glass]}   # optional cartesian product over settings
+
+Trials = cases x grid x seeds. Each finished trial is written atomically to
+`OUT/trials/<id>.json` (its settings and its result, or its error), so an interrupted sweep
+resumes without repeating a finished trial (`--resume`); `OUT/table.csv` (one row per trial)
+and `OUT/summary.csv` + `OUT/summary.md` (mean and sd over seeds per case) are rebuilt from
+those files alone.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import io
+import itertools
+import json
+import math
+import os
+import traceback
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from vlr.errors import UserError
+from vlr.io import write_json_atomic
+from vlr.trial import TrialSettings
+
+__all__ = ["Trial", "SweepSpec", "load_sweep", "parse_seeds", "expand", "run_one",
+           "pending", "collect", "write_tables", "COLUMNS"]
+
+
+@dataclass(frozen=True)
+class Trial:
+    """One trial of a sweep: its case name, its settings and a stable id."""
+
+    case: str
+    settings: TrialSettings
+
+    @property
+    def id(self) -> str:
+        """Readable and unique: case, object, hand, seed and a hash of all settings."""
+        s = self.settings
+        # Only settings that differ from the defaults: adding a setting to TrialSettings later
+        # must not rename (and so rerun) the trials of an existing sweep.
+        defaults = TrialSettings().to_dict()
+        changed = {k: v for k, v in s.to_dict().items() if v != defaults.get(k)}
+        blob = json.dumps({"case": self.case, **changed}, sort_keys=True)
+        digest = hashlib.sha1(blob.encode()).hexdigest()[:8]
+        slug = "".join(ch if ch.isalnum() else "-" for ch in self.case.lower()).strip("-")
+        return f"{slug}_{s.object}_{s.hand}_s{s.seed}_{digest}"
+
+
+@dataclass(frozen=True)
+class SweepSpec:
+    """A parsed sweep (module docstring)."""
+
+    name: str
+    out: Path
+    seeds: tuple[int, ...]
+    settings: dict[str, Any]
+    cases: tuple[dict[str, Any], ...]
+    grid: dict[str, list[Any]]
+
+
+def parse_seeds(value: Any) -> tuple[int, ...]:
+    """Seeds from a list, an int, or a string like "0-4" or "0,3,7"."""
+    if isinstance(value, int):
+        return (value,)
+    if isinstance(value, list | tuple):
+        out = value
+    else:
+        out = []
+        for part in str(value).split(","):
+            part = part.strip()
+            lo, sep, hi = part.partition("-")
+            try:
+                out += list(range(int(lo), int(hi) + 1)) if sep else [int(part)]
+            except ValueError:
+                raise UserError(f"seeds {value!r}: use e.g. 0-4 or 0,1,2") from None
+    try:
+        seeds = tuple(int(s) for s in out)
+    except (TypeError, ValueError):
+        raise UserError(f"seeds {value!r}: use e.g. 0-4 or 0,1,2") from None
+    if not seeds:
+        raise UserError("a sweep needs at least one seed")
+    return seeds
+
+
+def load_sweep(path: str | Path, out: str | Path | None = None) -> SweepSpec:
+    """Read a sweep YAML file (module docstring); `out` overrides its output folder."""
+    import yaml
+
+    path = Path(path)
+    try:
+        raw = yaml.safe_load(path.read_text())
+    except FileNotFoundError:
+        raise UserError(f"sweep file {str(path)!r} not found") from None
+    except yaml.YAMLError as exc:
+        raise UserError(f"sweep file {str(path)!r} is not valid YAML: {exc}") from None
+    if not isinstance(raw, dict):
+        raise UserError(f"sweep file {str(path)!r} must be a mapping")
+    bad = sorted(set(raw) - {"name", "out", "seeds", "settings", "cases", "grid"})
+    if bad:
+        raise UserError(f"sweep file {str(path)!r}: unknown key(s) {bad}; known: name, out, "
+                        "seeds, settings, cases, grid")
+    grid = raw.get("grid") or {}
+    if not isinstance(grid, dict) or not all(isinstance(v, list) for v in grid.values()):
+        raise UserError(f"sweep file {str(path)!r}: grid must map settings to lists")
+    target = out or raw.get("out")
+    if not target:
+        raise UserError(f"sweep file {str(path)!r}: give an output folder (out: or --out)")
+    return SweepSpec(name=str(raw.get("name", path.stem)), out=Path(target),
+                     seeds=parse_seeds(raw.get("seeds", 0)),
+                     settings=dict(raw.get("settings") or {}),
+                     cases=tuple(raw.get("cases") or ({},)), grid=grid)
+
+
+def expand(spec: SweepSpec) -> list[Trial]:
+    """Every trial of the sweep, in a stable order; settings validated up front."""
+    keys = list(spec.grid)
+    trials: list[Trial] = []
+    for case in spec.cases:
+        case = dict(case)
+        name = str(case.pop("name", "trial"))
+        for values in itertools.product(*(spec.grid[k] for k in keys)):
+            for seed in spec.seeds:
+                d = {**spec.settings, **case, **dict(zip(keys, values, strict=True)),
+                     "seed": seed}
+                trials.append(Trial(name, TrialSettings.from_dict(d)))
+    ids = [t.id for t in trials]
+    if len(set(ids)) != len(ids):
+        raise UserError("the sweep defines the same trial twice; check cases and grid")
+    return trials
+
+
+def trial_path(out: Path, trial: Trial) -> Path:
+    return out / "trials" / f"{trial.id}.json"
+
+
+def pending(trials: Iterable[Trial], out: Path, retry_failed: bool = False) -> list[Trial]:
+    """Trials without a result file (and failed ones, if asked)."""
+    todo = []
+    for t in trials:
+        p = trial_path(out, t)
+        if not p.exists():
+            todo.append(t)
+        elif retry_failed and json.loads(p.read_text()).get("status") != "ok":
+            todo.append(t)
+    return todo
+
+
+def run_one(trial: Trial, out: Path, keep_files: bool = False) -> dict[str, Any]:
+    """Run one trial and write its record atomically; a failure is recorded, not raised.
+
+    Runs in a worker process (top-level function: picklable). Seeds fix its numbers whichever
+    worker runs it."""
+    from vlr.trial import run_trial
+
+    record: dict[str, Any] = {"id": trial.id, "case": trial.case,
+                              "settings": trial.settings.to_dict()}
+    try:
+        files = out / "trials" / trial.id if keep_files else None
+        result = run_trial(trial.settings, files)
+        result.pop("settings", None)
+        record.update(status="ok", result=result)
+    except Exception as exc:  # noqa: BLE001 - a sweep reports a failed trial and goes on
+        record.update(status="error", error=f"{type(exc).__name__}: {exc}",
+                      traceback=traceback.format_exc(limit=6))
+    write_json_atomic(trial_path(out, trial), record)
+    return record
+
+
+# --------------------------------------------------------------------------- tables
+
+# Per-trial columns: (header, path into the record). Paths name keys of result.json.
+COLUMNS: list[tuple[str, tuple[str, ...]]] = [
+    ("case", ("case",)), ("backend", ("settings", "backend")),
+    ("object", ("settings", "object")), ("hand", ("settings", "hand")),
+    ("true_hand", ("settings", "true_hand")), ("particles", ("settings", "particles")),
+    ("seed", ("settings", "seed")), ("status", ("status",)),
+    ("converged", ("result", "converged")), ("iterations", ("result", "converged_at")),
+    ("proximal_deg", ("result", "errors", "proximal_deg_mean")),
+    ("distal_deg", ("result", "errors", "distal_deg_mean")),
+    ("contact_mm", ("result", "errors", "contact_mm_mean")),
+    ("coverage", ("result", "coverage")),
+    ("s_per_iteration", ("result", "timing", "filter_s_per_iteration_median")),
+]
+
+
+def _get(d: Any, path: tuple[str, ...]) -> Any:
+    for k in path:
+        if not isinstance(d, dict) or k not in d:
+            return None
+        d = d[k]
+    return d
+
+
+def _row(rec: dict[str, Any]) -> dict[str, Any]:
+    row = {name: _get(rec, path) for name, path in COLUMNS}
+    errors = _get(rec, ("result", "errors")) or {}
+    for finger, v in (errors.get("link_length_mm") or {}).items():
+        row[f"length_mm.{finger}"] = v
+    for joint, v in (errors.get("stiffness") or {}).items():
+        row[f"stiffness.{joint}"] = v
+    if rec.get("status") != "ok":
+        row["error"] = rec.get("error")
+    return row
+
+
+def collect(out: Path, trials: Iterable[Trial] | None = None) -> list[dict[str, Any]]:
+    """The records of the sweep's trials found in OUT/trials (all of them if trials is None),
+    in the sweep's order."""
+    if trials is None:
+        paths = sorted((out / "trials").glob("*.json"))
+    else:
+        paths = [trial_path(out, t) for t in trials]
+    return [json.loads(p.read_text()) for p in paths if p.exists()]
+
+
+def _fmt(values: list[float], digits: int) -> str:
+    v = [x for x in values if x is not None and math.isfinite(x)]
+    if not v:
+        return "-"
+    if len(v) == 1:
+        return f"{v[0]:.{digits}f}"
+    return f"{np.mean(v):.{digits}f} ± {np.std(v, ddof=1):.{digits}f}"
+
+
+SUMMARY_COLUMNS = [("proximal [deg]", "proximal_deg", 2), ("distal [deg]", "distal_deg", 2),
+                   ("contact [mm]", "contact_mm", 2), ("iterations", "iterations", 1),
+                   ("coverage", "coverage", 2), ("s/iteration", "s_per_iteration", 2)]
+
+
+def summarize_rows(rows: list[dict[str, Any]]) -> list[dict[str, str]]:
+    """Mean ± sd over seeds per (case, backend, object, hand, true hand, particles)."""
+    key_names = ("case", "backend", "object", "hand", "true_hand", "particles")
+    groups: dict[tuple, list[dict[str, Any]]] = {}
+    for r in rows:
+        groups.setdefault(tuple(r.get(k) for k in key_names), []).append(r)
+    out = []
+    for key, rs in groups.items():
+        ok = [r for r in rs if r.get("status") == "ok"]
+        s = dict(zip(key_names, ["" if k is None else str(k) for k in key], strict=True))
+        s["trials"] = f"{len(ok)}/{len(rs)}"
+        s["converged"] = f"{sum(bool(r.get('converged')) for r in ok)}/{len(ok)}"
+        for title, col, digits in SUMMARY_COLUMNS:
+            s[title] = _fmt([r.get(col) for r in ok], digits)
+        extra = sorted({k for r in ok for k in r if k.startswith(("length_mm.",
+                                                                     "stiffness."))})
+        for col in extra:
+            digits = 4 if col.startswith("stiffness.") else 2
+            unit = "N m/rad" if col.startswith("stiffness.") else "mm"
+            s[f"{col} error [{unit}]"] = _fmt([r.get(col) for r in ok], digits)
+        out.append(s)
+    return out
+
+
+def _csv_text(rows: list[dict[str, Any]]) -> str:
+    cols: list[str] = []
+    for r in rows:
+        cols += [c for c in r if c not in cols]
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=cols, lineterminator="\n")
+    w.writeheader()
+    for r in rows:
+        w.writerow(r)
+    return buf.getvalue()
+
+
+def markdown_table(summary: list[dict[str, str]]) -> str:
+    """GitHub Markdown of the summary rows (columns that are empty everywhere dropped)."""
+    if not summary:
+        return "(no finished trials)\n"
+    cols: list[str] = []
+    for r in summary:
+        cols += [c for c in r if c not in cols]
+    cols = [c for c in cols if any(r.get(c) not in ("", "-", None) for r in summary)]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for r in summary:
+        lines.append("| " + " | ".join(str(r.get(c, "")) for c in cols) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _write_text_atomic(path: Path, text: str) -> None:
+    import tempfile
+
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    with os.fdopen(fd, "w") as f:
+        f.write(text)
+    os.replace(tmp, path)
+
+
+def write_tables(out: Path, records: list[dict[str, Any]], title: str = "sweep",
+                 note: str = "") -> dict[str, Path]:
+    """table.csv (per trial), summary.csv and summary.md (per case), written atomically."""
+    out.mkdir(parents=True, exist_ok=True)
+    rows = [_row(r) for r in records]
+    summary = summarize_rows(rows)
+    paths = {"table": out / "table.csv", "summary_csv": out / "summary.csv",
+             "summary_md": out / "summary.md"}
+    _write_text_atomic(paths["table"], _csv_text(rows))
+    _write_text_atomic(paths["summary_csv"], _csv_text(summary))
+    failed = [r for r in rows if r.get("status") != "ok"]
+    md = f"# {title}\n\n{note}{markdown_table(summary)}"
+    if failed:
+        md += "\nFailed trials:\n\n" + "".join(
+            f"- {r['case']} {r['object']} seed {r['seed']}: {r.get('error')}\n" for r in failed)
+    _write_text_atomic(paths["summary_md"], md)
+    return paths
+
+
+def run_local(trials: list[Trial], out: Path, workers: int,
+              on_done: Callable[[dict[str, Any]], None], keep_files: bool = False) -> None:
+    """Run trials on a local process pool (`workers` processes; 1 runs in this process).
+
+    Each worker gets an equal share of the cores for numba's threads."""
+    if workers <= 1:
+        for t in trials:
+            on_done(run_one(t, out, keep_files))
+        return
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor, as_completed
+
+    threads = max(1, (os.cpu_count() or 1) // workers)
+    # spawn, not fork: forking a process whose numba threads already ran is unsafe.
+    with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
+                             initargs=(threads,),
+                             mp_context=multiprocessing.get_context("spawn")) as pool:
+        futures = [pool.submit(run_one, t, out, keep_files) for t in trials]
+        for f in as_completed(futures):
+            on_done(f.result())
+
+
+def _init_worker(threads: int) -> None:
+    os.environ["NUMBA_NUM_THREADS"] = str(threads)

@@ -1,0 +1,254 @@
+"""One identification trial, defined by plain settings: what `vlr identify` and `vlr sweep` run.
+
+A trial opens a world (the synthetic world of `vlr.synthetic`, or a backend registered under
+`vlr.backends`: sim, hardware), runs the self-identification loop (`vlr.identify`) on the
+nominal hand, scores it against ground truth where the world has one (scoring only) and
+returns the `result.json` summary (`vlr.commands.identify.summarize`).
+
+Settings are a frozen dataclass with a dict form, so that sweeps can write them next to each
+result and rebuild the table from files alone.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import asdict, dataclass, field, fields
+from pathlib import Path
+from types import SimpleNamespace
+from typing import Any
+
+import numpy as np
+
+from vlr.errors import UserError
+
+__all__ = ["TrialSettings", "World", "open_world", "run_trial", "DEFAULT_SIGMA"]
+
+# Likelihood scales (sigma_pos [mm], sigma_rot [deg]) per backend (vlr.observation). The
+# synthetic world IS the model, so only its observation noise (0.05 mm, 0.2 deg) counts, with a
+# factor 2 margin; the sim and the real hand add the model-world gap (METHOD.md 8.1).
+DEFAULT_SIGMA = {"synthetic": (0.1, 0.4), "sim": (0.5, 1.0), "hardware": (0.5, 1.0)}
+
+# Synthetic world: an unknown spring whose true rate is not given is drawn from this range of
+# its nominal rate, with the trial's seed (a replaced spring is not the nominal one).
+TRUE_STIFFNESS_RANGE = (0.5, 2.0)
+
+
+@dataclass(frozen=True)
+class TrialSettings:
+    """Everything that defines one trial (units in brackets).
+
+    Attributes:
+        backend: "synthetic", "sim" or "hardware" (any registered backend).
+        object: object name or YAML path.
+        hand: the hand the user believes in (nominal).
+        true_hand: synthetic only: the real hand when it differs (e.g. nh1).
+        particles: P.
+        seed: seeds the world, the filter and the actions.
+        unknowns: extra unknowns ("stiffness:thumb.distal", "length:left.proximal", ...).
+        true_stiffness: synthetic only: {"finger.joint": k [N m/rad]} true spring rates.
+        max_iterations: action budget; min_iterations: no convergence stop before this.
+        sigma_pos_mm, sigma_rot_deg: likelihood scales; None takes `DEFAULT_SIGMA`.
+        nominal_theta_deg: the user's guess of the grasp's joint angles, every finger, one
+            per joint [deg] (what one sees looking at the hand); None: the synthetic world's
+            generic guess (vlr.synthetic.SyntheticConfig.grasp_theta). The prior is the nominal
+            hand's equilibrium from there (vlr.synthetic.nominal_grasp).
+        prior_spread_deg: prior std of the joint angles about the nominal grasp [deg].
+        config: hardware only: the hardware YAML file.
+    """
+
+    backend: str = "sim"
+    object: str = "apple"
+    hand: str = "modelo"
+    true_hand: str | None = None
+    particles: int = 60_000
+    seed: int = 0
+    unknowns: tuple[str, ...] = ()
+    true_stiffness: dict[str, float] = field(default_factory=dict)
+    max_iterations: int = 40
+    min_iterations: int = 0
+    sigma_pos_mm: float | None = None
+    sigma_rot_deg: float | None = None
+    nominal_theta_deg: tuple[float, ...] | None = None
+    prior_spread_deg: float = 3.0
+    config: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.particles < 10:
+            raise UserError(f"particles {self.particles} must be >= 10")
+        if self.max_iterations < 1:
+            raise UserError(f"max_iterations {self.max_iterations} must be >= 1")
+        if not 0 <= self.min_iterations <= self.max_iterations:
+            raise UserError(f"min_iterations {self.min_iterations} must be in "
+                            f"[0, max_iterations={self.max_iterations}]")
+        for name in ("sigma_pos_mm", "sigma_rot_deg"):
+            v = getattr(self, name)
+            if v is not None and not v > 0:
+                raise UserError(f"{name} {v} must be > 0")
+        if self.true_hand and self.backend != "synthetic":
+            raise UserError("true_hand is for the synthetic world only: the sim and the real "
+                            "hand are what they are")
+        if not self.prior_spread_deg > 0:
+            raise UserError(f"prior_spread_deg {self.prior_spread_deg} must be > 0")
+        object.__setattr__(self, "unknowns", tuple(self.unknowns))
+        if self.nominal_theta_deg is not None:
+            object.__setattr__(self, "nominal_theta_deg",
+                               tuple(float(v) for v in self.nominal_theta_deg))
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> TrialSettings:
+        """Settings from a dict (a sweep file's entry); unknown keys are named in the error."""
+        known = {f.name for f in fields(cls)}
+        bad = sorted(set(d) - known)
+        if bad:
+            raise UserError(f"unknown trial setting(s) {bad}; known: {sorted(known)}")
+        return cls(**d)
+
+    def to_dict(self) -> dict[str, Any]:
+        d = asdict(self)
+        d["unknowns"] = list(self.unknowns)
+        if self.nominal_theta_deg is not None:
+            d["nominal_theta_deg"] = list(self.nominal_theta_deg)
+        return d
+
+    @property
+    def sigma(self) -> tuple[float, float]:
+        """(sigma_pos [mm], sigma_rot [deg]) in effect."""
+        pos, rot = DEFAULT_SIGMA.get(self.backend, DEFAULT_SIGMA["sim"])
+        return (self.sigma_pos_mm or pos, self.sigma_rot_deg or rot)
+
+
+@dataclass
+class World:
+    """An opened trial world: what `vlr.identify.identify` needs, plus scoring and cleanup."""
+
+    world: Any
+    observer: Callable[[], Any]
+    truth: Callable[[], Any] | None
+    model: Any
+    obj: Any
+    nominal: Any
+    hand_spec: Any
+    object_spec: Any
+    hand: Any = None  # the backend's Hand, closed by close()
+
+    def close(self) -> None:
+        if self.hand is not None:
+            self.hand.close()
+
+
+def _true_stiffness(settings: TrialSettings, model) -> dict[tuple[int, int], float]:
+    """{(finger, joint): k} of the synthetic world: given values, else seeded draws."""
+    out: dict[tuple[int, int], float] = {}
+    rng = np.random.default_rng([settings.seed, 7919])
+    for key, value in settings.true_stiffness.items():
+        f, _, j = key.partition(".")
+        try:
+            out[(model.finger_index(f), model.joint_index(j))] = float(value)
+        except (KeyError, ValueError) as exc:
+            raise UserError(f"true_stiffness {key!r}: {exc}") from None
+    for spec in settings.unknowns:
+        kind, _, rest = spec.partition(":")
+        if kind != "stiffness":
+            continue
+        f, _, j = rest.partition(".")
+        key = (model.finger_index(f), model.joint_index(j))
+        if key not in out:
+            out[key] = float(model.stiffness[key] * rng.uniform(*TRUE_STIFFNESS_RANGE))
+    return out
+
+
+def open_world(settings: TrialSettings) -> World:
+    """Open the trial's world (module docstring). The caller closes it."""
+    from vlr.kinematics import HandModel
+    from vlr.motion import ObjectParams
+    from vlr.spec import load_hand, load_object
+    from vlr.synthetic import SyntheticConfig, SyntheticWorld, nominal_grasp
+
+    hand_spec = load_hand(settings.hand)
+    obj_spec = load_object(settings.object)
+    model = HandModel.from_spec(hand_spec)
+    obj = ObjectParams.from_spec(obj_spec)
+    guess = SyntheticConfig()
+    if settings.nominal_theta_deg is not None:
+        if len(settings.nominal_theta_deg) != model.n_joints:
+            raise UserError(f"nominal_theta_deg {list(settings.nominal_theta_deg)}: give "
+                            f"{model.n_joints} angles, one per joint")
+        guess = SyntheticConfig(grasp_theta=tuple(np.radians(settings.nominal_theta_deg)))
+    nominal = nominal_grasp(model, obj, guess)
+    if settings.backend == "synthetic":
+        true_model = (HandModel.from_spec(load_hand(settings.true_hand))
+                      if settings.true_hand else model)
+        world = SyntheticWorld(true_model, obj, SyntheticConfig(seed=settings.seed),
+                               nominal_model=model,
+                               stiffness_overrides=_true_stiffness(settings, true_model))
+        return World(world, world.observe, world.truth, model, obj, nominal, hand_spec,
+                     obj_spec)
+    from vlr.cli import open_backend
+    from vlr.perception import observe
+
+    options = {"config": settings.config} if settings.config else {}
+    hand = open_backend(settings.backend, object=settings.object, hand=settings.hand,
+                        seed=settings.seed, **options)
+    spec = hand.object_spec
+
+    def observer():
+        frame = hand.grab_frame()
+        if frame is None:
+            return None
+        return observe(frame.image, hand.calibration, spec.tag_id, spec.tag_size)
+
+    truth = getattr(hand, "scoring_truth", None)  # sim only; never given to the filter
+    return World(hand, observer, truth, model, obj, nominal, hand_spec, spec, hand)
+
+
+def identify_config(settings: TrialSettings, model):
+    """The `IdentifyConfig` of a trial; bad unknown specs become a UserError."""
+    from vlr.filter import FilterConfig, parse_unknown
+    from vlr.identify import IdentifyConfig
+    from vlr.observation import ObservationModel
+
+    for u in settings.unknowns:
+        try:
+            parse_unknown(u, model)
+        except (ValueError, KeyError) as exc:
+            raise UserError(f"unknown {u!r}: {exc}") from None
+    sp, sr = settings.sigma
+    fcfg = FilterConfig(n_particles=settings.particles, seed=settings.seed,
+                        unknowns=settings.unknowns,
+                        theta_spread=float(np.radians(settings.prior_spread_deg)),
+                        observation=ObservationModel(sigma_pos=sp * 1e-3,
+                                                     sigma_rot=float(np.radians(sr))))
+    return IdentifyConfig(max_iterations=settings.max_iterations,
+                          min_iterations=settings.min_iterations, filter=fcfg)
+
+
+def run_trial(settings: TrialSettings, out: Path | None = None,
+              progress: Callable | None = None, watch: Callable | None = None) -> dict:
+    """Run one trial; write its files into `out` if given; return the result summary."""
+    from vlr.commands.identify import summarize, write_outputs
+    from vlr.identify import identify
+
+    t0 = time.perf_counter()
+    w = open_world(settings)
+    try:
+        cfg = identify_config(settings, w.model)
+        truths: list = []
+        scorer = None
+        if w.truth is not None:
+            def scorer():  # scoring only; the filter never sees this
+                truths.append(w.truth())
+                return truths[-1]
+        result = identify(w.world, w.observer, w.model, w.obj, w.nominal, cfg, truth=scorer,
+                          progress=progress, watch=watch)
+    finally:
+        w.close()
+    args = SimpleNamespace(backend=settings.backend, object=settings.object,
+                           hand=settings.hand, particles=settings.particles,
+                           seed=settings.seed, unknown=list(settings.unknowns))
+    summary = summarize(result, w.model, args, time.perf_counter() - t0,
+                        truths[-1] if truths else None)
+    summary["settings"] = settings.to_dict()
+    if out is not None:
+        write_outputs(Path(out), result, summary, w.model, truths)
+    return summary
