@@ -15,8 +15,9 @@ A sweep is a YAML file (or the equivalent `vlr sweep` flags):
 Trials = cases x grid x seeds. Each finished trial is written atomically to
 `OUT/trials/<id>.json` (its settings and its result, or its error), so an interrupted sweep
 resumes without repeating a finished trial (`--resume`); `OUT/table.csv` (one row per trial)
-and `OUT/summary.csv` + `OUT/summary.md` (mean and sd over seeds per case) are rebuilt from
-those files alone.
+and `OUT/summary.csv` + `OUT/summary.md` (mean and sd over seeds per case), with
+`OUT/boxplots.png` (errors per case and object, `vlr.plots.boxplots`), are rebuilt from those
+files alone.
 """
 
 from __future__ import annotations
@@ -321,6 +322,15 @@ def write_tables(out: Path, records: list[dict[str, Any]], title: str = "sweep",
         md += "\nFailed trials:\n\n" + "".join(
             f"- {r['case']} {r['object']} seed {r['seed']}: {r.get('error')}\n" for r in failed)
     _write_text_atomic(paths["summary_md"], md)
+    ok = [r for r in records if r.get("status") == "ok" and r["result"].get("errors")]
+    if ok:
+        from vlr.plots import boxplots
+
+        cases = {r["case"] for r in ok}
+        box_rows = [{**r["result"], "object": (f"{r['case']}\n{r['settings']['object']}"
+                                               if len(cases) > 1
+                                               else r["settings"]["object"])} for r in ok]
+        paths["boxplots"] = boxplots(box_rows, out / "boxplots.png")
     return paths
 
 
