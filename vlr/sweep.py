@@ -30,7 +30,7 @@ import json
 import math
 import os
 import traceback
-from collections.abc import Callable, Iterable
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -38,11 +38,12 @@ from typing import Any
 import numpy as np
 
 from vlr.errors import UserError
+from vlr.executors import run_local, run_ray
 from vlr.io import write_json_atomic
 from vlr.trial import TrialSettings
 
 __all__ = ["Trial", "SweepSpec", "load_sweep", "parse_seeds", "expand", "run_one",
-           "pending", "collect", "write_tables", "COLUMNS"]
+           "pending", "collect", "write_tables", "COLUMNS", "run_local", "run_ray"]
 
 
 @dataclass(frozen=True)
@@ -165,11 +166,13 @@ def pending(trials: Iterable[Trial], out: Path, retry_failed: bool = False) -> l
     return todo
 
 
-def run_one(trial: Trial, out: Path, keep_files: bool = False) -> dict[str, Any]:
-    """Run one trial and write its record atomically; a failure is recorded, not raised.
+def run_one(trial: Trial, out: Path, keep_files: bool = False,
+            write: bool = True) -> dict[str, Any]:
+    """Run one trial and write its record atomically (unless `write` is False); a failure is
+    recorded, not raised.
 
-    Runs in a worker process (top-level function: picklable). Seeds fix its numbers whichever
-    worker runs it."""
+    Runs in a worker process (top-level function: picklable) or a Ray task
+    (`vlr.executors`). Seeds fix its numbers whichever worker runs it."""
     from vlr.trial import run_trial
 
     record: dict[str, Any] = {"id": trial.id, "case": trial.case,
@@ -182,7 +185,8 @@ def run_one(trial: Trial, out: Path, keep_files: bool = False) -> dict[str, Any]
     except Exception as exc:  # noqa: BLE001 - a sweep reports a failed trial and goes on
         record.update(status="error", error=f"{type(exc).__name__}: {exc}",
                       traceback=traceback.format_exc(limit=6))
-    write_json_atomic(trial_path(out, trial), record)
+    if write:
+        write_json_atomic(trial_path(out, trial), record)
     return record
 
 
@@ -332,29 +336,3 @@ def write_tables(out: Path, records: list[dict[str, Any]], title: str = "sweep",
                                                else r["settings"]["object"])} for r in ok]
         paths["boxplots"] = boxplots(box_rows, out / "boxplots.png")
     return paths
-
-
-def run_local(trials: list[Trial], out: Path, workers: int,
-              on_done: Callable[[dict[str, Any]], None], keep_files: bool = False) -> None:
-    """Run trials on a local process pool (`workers` processes; 1 runs in this process).
-
-    Each worker gets an equal share of the cores for numba's threads."""
-    if workers <= 1:
-        for t in trials:
-            on_done(run_one(t, out, keep_files))
-        return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
-
-    threads = max(1, (os.cpu_count() or 1) // workers)
-    # spawn, not fork: forking a process whose numba threads already ran is unsafe.
-    with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
-                             initargs=(threads,),
-                             mp_context=multiprocessing.get_context("spawn")) as pool:
-        futures = [pool.submit(run_one, t, out, keep_files) for t in trials]
-        for f in as_completed(futures):
-            on_done(f.result())
-
-
-def _init_worker(threads: int) -> None:
-    os.environ["NUMBA_NUM_THREADS"] = str(threads)

@@ -1,8 +1,10 @@
-"""`vlr sweep`: many identification trials on a local process pool, one table at the end.
+"""`vlr sweep`: many identification trials on a local process pool or a Ray cluster, one
+table at the end.
 
     vlr sweep docs/sweeps/synthetic.yaml               # a sweep file (vlr.sweep)
     vlr sweep --backend sim --object apple wine_glass --seeds 0-4 --particles 60000 --out DIR
     vlr sweep FILE --resume                            # skip trials already finished
+    vlr sweep FILE --executor ray --address ray://HEAD:10001   # one Ray task per trial
 
 Every finished trial lands in OUT/trials/<id>.json at once (written atomically), so a sweep
 interrupted at any point resumes with --resume without repeating one. The tables
@@ -32,8 +34,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seeds", default="0-4", help="e.g. 0-4 or 0,2,5 (default 0-4)")
     p.add_argument("--particles", type=int, default=60_000)
     p.add_argument("--max-iterations", type=int, default=40)
-    p.add_argument("--workers", type=int, default=1,
-                   help="processes in the pool (each gets cores/workers numba threads)")
+    p.add_argument("--workers", type=int, default=None,
+                   help="local: processes in the pool (default 1; each gets cores/workers "
+                   "numba threads); ray: CPUs of a local instance (default all cores), or "
+                   "the trials in flight on a cluster (default all)")
+    p.add_argument("--executor", choices=("local", "ray"), default="local",
+                   help="local process pool (default) or one Ray task per trial "
+                   "(pip install -e '.[cluster]')")
+    p.add_argument("--address", help="with --executor ray: the cluster, e.g. "
+                   "ray://HEAD:10001 (default: RAY_ADDRESS, else a local Ray instance)")
     p.add_argument("--resume", action="store_true",
                    help="keep finished trials in OUT and run only the others")
     p.add_argument("--retry-failed", action="store_true",
@@ -61,10 +70,15 @@ def _spec(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from vlr.sweep import collect, expand, pending, run_local, write_tables
+    from vlr.executors import import_ray, run_local, run_ray
+    from vlr.sweep import collect, expand, pending, write_tables
 
-    if args.workers < 1:
+    if args.workers is not None and args.workers < 1:
         raise UserError(f"--workers {args.workers} must be >= 1")
+    if args.address and args.executor != "ray":
+        raise UserError("--address names a Ray cluster: use it with --executor ray")
+    if args.executor == "ray" and not args.table_only:
+        import_ray()  # fail before any work if Ray is missing
     spec = _spec(args)
     trials = expand(spec)
     out = spec.out
@@ -98,7 +112,11 @@ def run(args: argparse.Namespace) -> int:
             bar.update(1)
 
     try:
-        run_local(todo, out, args.workers, on_done, keep_files=args.keep_files)
+        if args.executor == "ray":
+            run_ray(todo, out, args.workers, on_done, keep_files=args.keep_files,
+                    address=args.address)
+        else:
+            run_local(todo, out, args.workers, on_done, keep_files=args.keep_files)
     finally:
         if bar is not None:
             bar.close()
