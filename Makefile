@@ -10,7 +10,7 @@ setup: install demo
 install:
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -c constraints.txt -e '.[dev]'
+	$(BIN)/pip install -q -c constraints.txt -e '.[dev,cluster]'
 
 demo:
 	$(BIN)/vlr demo --object apple --seed 0
