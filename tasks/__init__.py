@@ -25,6 +25,7 @@ CUP_STACKING = "vlr/CupStacking-v0"
 # One table: id -> entry point (a string, so that importing `tasks` stays cheap).
 ENVIRONMENTS: dict[str, str] = {
     HANDWRITING: "tasks.handwriting:HandwritingEnv",
+    MARBLE_MAZE: "tasks.maze:MarbleMazeEnv",
 }
 
 for _id, _entry in ENVIRONMENTS.items():

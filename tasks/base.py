@@ -58,10 +58,13 @@ class HandTaskEnv(gym.Env):
         particles: particle count of the identification in reset.
         identify_iterations: its iteration budget (it stops earlier on convergence).
         max_step: action bound per tendon and move [m].
-        command_band: commands stay within this distance of the task's centre command [m].
-        squeeze: after identification, every tendon is pulled by this much [m] (in moves
-            of at most `max_step`, the filter following) before the task starts: a firmer
-            grasp whose centre command is the band's centre.
+        command_band: (release, pull): commands stay within [centre - release, centre +
+            pull] of the task's centre command [m]. Releasing is what loses a fingertip
+            (a side finger's 12 N grasp tension is gone after 0.6 mm at 20 N/mm), so the
+            default band releases less than it pulls.
+        squeeze: the task's centre command is the grasp command plus this much on every
+            tendon [m]; after identification the commands move there (in moves of at most
+            `max_step`, the filter following) before the task starts.
         include_image: add the palm camera frame to the observation ("image"), resized to
             `image_size` (height, width) [px].
         hardware_config: the hardware YAML file (backend "hardware").
@@ -73,7 +76,8 @@ class HandTaskEnv(gym.Env):
 
     def __init__(self, backend: str = "sim", render_mode: str | None = None,
                  particles: int = 5000, identify_iterations: int = 15,
-                 max_step: float = 0.4e-3, command_band: float = 0.4e-3,
+                 max_step: float = 0.4e-3,
+                 command_band: tuple[float, float] = (0.25e-3, 0.4e-3),
                  squeeze: float = 0.0,
                  include_image: bool = False, image_size: tuple[int, int] = (120, 160),
                  hardware_config: str | None = None) -> None:
@@ -91,7 +95,10 @@ class HandTaskEnv(gym.Env):
         self.particles = int(particles)
         self.identify_iterations = int(identify_iterations)
         self.max_step = float(max_step)
-        self.command_band = float(command_band)
+        band = np.broadcast_to(np.asarray(command_band, dtype=float), (2,))
+        if np.any(band < 0):
+            raise ValueError(f"command_band {command_band!r} must be >= 0")
+        self.command_band = (float(band[0]), float(band[1]))
         self.squeeze = float(squeeze)
         self.include_image = bool(include_image)
         self.hardware_config = hardware_config
@@ -201,8 +208,9 @@ class HandTaskEnv(gym.Env):
         self._u = np.asarray(self.hand.commands, dtype=float).copy()
         self.observation = next(m.observation for m in reversed(self.moves)
                                 if m.observation is not None)
-        start = self.commands
-        self.center = start + self.squeeze
+        # The task's centre is the grasp command (identification's exploration leaves the
+        # commands anywhere in its band), plus the squeeze.
+        self.center = self.moves[0].commands + self.squeeze
         while np.max(np.abs(self.center - self.commands)) > 1e-9 and not self.grasp_lost:
             self._apply(np.clip(self.center - self.commands, -self.max_step, self.max_step))
         self._start_task()
@@ -211,7 +219,8 @@ class HandTaskEnv(gym.Env):
     def step(self, action):
         a = np.clip(np.asarray(action, dtype=float).reshape(3), -self.max_step, self.max_step)
         u = self.commands
-        target = np.clip(u + a, self.center - self.command_band, self.center + self.command_band)
+        release, pull = self.command_band
+        target = np.clip(u + a, self.center - release, self.center + pull)
         self._apply(target - u)
         reward, terminated = self._task_step()
         terminated = bool(terminated or self.grasp_lost)

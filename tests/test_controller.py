@@ -100,12 +100,17 @@ def test_secant_fit_and_update_recover_a_linear_map_the_vlr_misses():
     ctl.fit(d, d @ true.T, jacobian=np.zeros((6, 3)))   # a VLR that sees no motion at all
     np.testing.assert_allclose(ctl.jacobian, true, rtol=1e-4, atol=1e-4)
     # Broyden updates learn the map along the moves made
-    ctl = JacobianController(ControllerConfig(secant=True))
+    ctl = JacobianController(ControllerConfig(secant=True, secant_updates=True))
     ctl.fit(np.zeros((0, 3)), np.zeros((0, 6)), jacobian=np.zeros((6, 3)))
     for _ in range(60):
         du = rng.uniform(-0.3e-3, 0.3e-3, 3)
         ctl.learn(du, true @ du)
     np.testing.assert_allclose(ctl.jacobian, true, atol=1e-3 * np.abs(true).max())
+    fixed = JacobianController(ControllerConfig(secant=True))   # fit only: learn is a no-op
+    fixed.fit(d, d @ true.T, jacobian=np.zeros((6, 3)))
+    before = fixed.jacobian.copy()
+    fixed.learn(d[0], np.ones(6))
+    np.testing.assert_array_equal(fixed.jacobian, before)
     off = JacobianController(ControllerConfig(secant=False))
     off.fit(d, d @ true.T, jacobian=np.zeros((6, 3)))
     assert off.correction is None and np.all(off.jacobian == 0)

@@ -85,7 +85,14 @@ class ControllerConfig:
             so J = J_vlr + C. The VLR's Jacobian keeps changing as the filter updates; C
             carries what the camera saw that the VLR does not explain (an imperfect
             identification, e.g. a tendon the VLR believes slack).
+        secant_updates: also update C after every move (Broyden), not only from the batch
+            given to `fit`. Off by default: with stick-slip at the contacts, a small move's
+            secant misleads more than it teaches (measured in docs/TASKS.md).
         secant_min_step: moves smaller than this [m] are too noisy to learn from.
+        max_motion_pos: trust region (ours): a step is scaled down so that the POM motion
+            the Jacobian predicts for it is at most this [m] ...
+        max_motion_rot: ... and this [rad]. Where the grasp is very sensitive (a tendon
+            that tips the object by degrees per 0.1 mm) a full step would overshoot.
     """
 
     rows: str = "position"
@@ -100,7 +107,10 @@ class ControllerConfig:
     jacobian_eps: float = 0.05e-3
     jacobian_particles: int = 16
     secant: bool = False
+    secant_updates: bool = False
     secant_min_step: float = 0.02e-3
+    max_motion_pos: float = 0.5e-3
+    max_motion_rot: float = float(np.radians(0.5))
 
     def __post_init__(self) -> None:
         if self.rows not in ROWS:
@@ -274,11 +284,13 @@ class JacobianController:
         """Secant (Broyden) update of the correction C from one move (`secant`): `delta`
         the tendon change [m], `motion` the POM motion the camera saw (6,) [m, rad]
         (`observed_motion`), `jacobian` J_vlr at the move (default: the last one taken).
-        A no-op unless `config.secant`."""
+        A no-op unless `config.secant` and `config.secant_updates`."""
         cfg = self.config
         jv = self.last_jacobian if jacobian is None else jacobian
         d = np.asarray(delta, dtype=float)
-        if not cfg.secant or jv is None or float(np.max(np.abs(d))) < cfg.secant_min_step:
+        if not (cfg.secant and cfg.secant_updates) or jv is None:
+            return
+        if float(np.max(np.abs(d))) < cfg.secant_min_step:
             return
         if self.correction is None:
             self.correction = np.zeros_like(jv)
@@ -304,7 +316,8 @@ class JacobianController:
 
     def step(self, jacobian: np.ndarray, error: np.ndarray) -> np.ndarray:
         """Tendon change (N,) [m] for a 6xN Jacobian and a 6-vector error (Eq. 11-12),
-        scaled down as a whole so no tendon moves more than `max_step`."""
+        scaled down as a whole so no tendon moves more than `max_step` and the predicted
+        POM motion stays in the trust region (`max_motion_pos`, `max_motion_rot`)."""
         cfg = self.config
         rows = list(ROWS[cfg.rows])
         w = row_weights(cfg.rows, cfg.alpha)
@@ -318,6 +331,11 @@ class JacobianController:
         biggest = float(np.max(np.abs(du))) if du.size else 0.0
         if biggest > cfg.max_step:
             du *= cfg.max_step / biggest
+        pred = jacobian @ du
+        moved = (float(np.linalg.norm(pred[:3])) / cfg.max_motion_pos,
+                 float(np.linalg.norm(pred[3:])) / cfg.max_motion_rot)
+        if max(moved) > 1.0:
+            du /= max(moved)
         return du
 
     def act(self, motion: MotionModel, state: ParticleState, command: np.ndarray,

@@ -76,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
     if args.particles < 10:
         raise UserError(f"--particles {args.particles} must be >= 10")
     env_id = found[args.name].load()      # importing the tasks package registers the envs
+    if env_id not in gym.registry:
+        raise UserError(f"task {args.name!r} ({env_id}) is not available in this version")
     kwargs = {"backend": args.backend, "particles": args.particles,
               "identify_iterations": args.identify_iterations, **_parse_options(args.option)}
     if args.config:
