@@ -168,6 +168,7 @@ def open_world(settings: TrialSettings) -> World:
     hand_spec = load_hand(settings.hand)
     obj_spec = load_object(settings.object)
     model = HandModel.from_spec(hand_spec)
+    check_unknowns(settings, model)  # before a backend opens (and must be closed)
     obj = ObjectParams.from_spec(obj_spec)
     guess = SyntheticConfig()
     if settings.nominal_theta_deg is not None:
@@ -202,17 +203,24 @@ def open_world(settings: TrialSettings) -> World:
     return World(hand, observer, truth, model, obj, nominal, hand_spec, spec, hand)
 
 
-def identify_config(settings: TrialSettings, model):
-    """The `IdentifyConfig` of a trial; bad unknown specs become a UserError."""
-    from vlr.filter import FilterConfig, parse_unknown
-    from vlr.identify import IdentifyConfig
-    from vlr.observation import ObservationModel
+def check_unknowns(settings: TrialSettings, model) -> None:
+    """Bad unknown specs become one UserError naming the spec."""
+    from vlr.filter import parse_unknown
 
     for u in settings.unknowns:
         try:
             parse_unknown(u, model)
         except (ValueError, KeyError) as exc:
             raise UserError(f"unknown {u!r}: {exc}") from None
+
+
+def identify_config(settings: TrialSettings, model):
+    """The `IdentifyConfig` of a trial; bad unknown specs become a UserError."""
+    from vlr.filter import FilterConfig
+    from vlr.identify import IdentifyConfig
+    from vlr.observation import ObservationModel
+
+    check_unknowns(settings, model)
     sp, sr = settings.sigma
     fcfg = FilterConfig(n_particles=settings.particles, seed=settings.seed,
                         unknowns=settings.unknowns,
