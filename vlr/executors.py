@@ -89,13 +89,18 @@ def _ray_trial(trial: Trial, out: str, keep_files: bool, threads: int) -> dict[s
 
 
 def run_ray(trials: list[Trial], out: Path, workers: int | None, on_done: OnDone,
-            keep_files: bool = False, address: str | None = None) -> None:
+            keep_files: bool = False, address: str | None = None,
+            working_dir: str | Path | None = None) -> None:
     """Run trials as Ray tasks, one task (1 CPU) per trial.
 
     Connects to `address` (or RAY_ADDRESS) if given, else starts a local instance with
     `workers` CPUs (default: all cores) and shuts it down at the end. On a cluster, `workers`
     (if given) caps the trials in flight. A task that dies (worker crash, node lost) is
-    recorded as a failed trial and the sweep goes on, as with the local pool."""
+    recorded as a failed trial and the sweep goes on, as with the local pool.
+
+    `working_dir` (a checkout of this repository) is shipped to the workers with the tasks
+    (Ray's runtime_env working_dir), for clusters whose nodes have the dependencies but not
+    this code; otherwise each node needs the package installed (docs/SWEEPS.md)."""
     ray = import_ray()
     if not trials:
         return
@@ -104,15 +109,25 @@ def run_ray(trials: list[Trial], out: Path, workers: int | None, on_done: OnDone
 
     address = address or os.environ.get("RAY_ADDRESS") or None
     out = Path(out).resolve()
+    # The job's runtime_env (Ray ships a working_dir at the job level only, in ray.init).
+    runtime_env: dict[str, Any] = {}
+    if working_dir:
+        runtime_env["working_dir"] = str(Path(working_dir).resolve())
+        runtime_env["excludes"] = [".git", ".venv", "runs", "**/__pycache__"]
+    if address and os.environ.get("NUMBA_CACHE_DIR"):
+        # Workers on other machines use the driver's numba cache folder (on a shared
+        # filesystem): the kernels compile once, not once per node.
+        runtime_env["env_vars"] = {"NUMBA_CACHE_DIR": os.environ["NUMBA_CACHE_DIR"]}
     started = False
-    if not ray.is_initialized():
+    if ray.is_initialized():
+        if working_dir:
+            raise UserError("--working-dir: Ray is already initialized in this process; "
+                            "its runtime_env cannot change")
+    else:
         kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": True}
+        if runtime_env:
+            kwargs["runtime_env"] = runtime_env
         if address:
-            # Workers on other machines get the driver's numba cache folder, if one is set
-            # (e.g. on a shared filesystem), so they compile the kernels once, not per node.
-            if os.environ.get("NUMBA_CACHE_DIR"):
-                kwargs["runtime_env"] = {"env_vars": {
-                    "NUMBA_CACHE_DIR": os.environ["NUMBA_CACHE_DIR"]}}
             try:
                 ray.init(address=address, **kwargs)
             except (ConnectionError, ValueError, RuntimeError) as exc:

@@ -43,6 +43,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "(pip install -e '.[cluster]')")
     p.add_argument("--address", help="with --executor ray: the cluster, e.g. "
                    "ray://HEAD:10001 (default: RAY_ADDRESS, else a local Ray instance)")
+    p.add_argument("--working-dir", help="with --executor ray: ship this checkout to the "
+                   "workers (Ray runtime_env working_dir) instead of installing it on each "
+                   "node")
     p.add_argument("--resume", action="store_true",
                    help="keep finished trials in OUT and run only the others")
     p.add_argument("--retry-failed", action="store_true",
@@ -75,8 +78,11 @@ def run(args: argparse.Namespace) -> int:
 
     if args.workers is not None and args.workers < 1:
         raise UserError(f"--workers {args.workers} must be >= 1")
-    if args.address and args.executor != "ray":
-        raise UserError("--address names a Ray cluster: use it with --executor ray")
+    if (args.address or args.working_dir) and args.executor != "ray":
+        raise UserError("--address and --working-dir are for Ray: add --executor ray")
+    if args.working_dir and not Path(args.working_dir, "vlr").is_dir():
+        raise UserError(f"--working-dir {args.working_dir!r} is not a checkout of this "
+                        "repository (no vlr/ in it)")
     if args.executor == "ray" and not args.table_only:
         import_ray()  # fail before any work if Ray is missing
     spec = _spec(args)
@@ -114,7 +120,7 @@ def run(args: argparse.Namespace) -> int:
     try:
         if args.executor == "ray":
             run_ray(todo, out, args.workers, on_done, keep_files=args.keep_files,
-                    address=args.address)
+                    address=args.address, working_dir=args.working_dir)
         else:
             run_local(todo, out, args.workers, on_done, keep_files=args.keep_files)
     finally:
