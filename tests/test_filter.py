@@ -101,3 +101,21 @@ def test_prediction_only_step_and_records(modelo):
     x = pf.pack(pf.state)
     assert np.all(np.isfinite(x))
     assert len(pf.dim_names) == x.shape[1] == 12
+
+
+def test_filter_recovers_when_every_particle_fails():
+    """All solves failing must not end the run with no particle: the prior is resampled about
+    the last estimate at the current command."""
+    from vlr.synthetic import SyntheticConfig, SyntheticWorld, random_action
+
+    model = HandModel.from_spec(load_hand("modelo"))
+    obj = ObjectParams(mass=0.12, com=(0.0, 0.0, 0.03))
+    world = SyntheticWorld(model, obj, SyntheticConfig(seed=0))
+    u = world.grasp()
+    pf = ParticleFilter(model, obj, FilterConfig(n_particles=300, seed=0))
+    pf.initialize(world.observe(), u, world.nominal.theta, world.nominal.contact)
+    pf.state.theta[...] = np.nan  # every solve fails
+    u = world.apply(random_action(np.random.default_rng(0), 3))
+    rec = pf.step(u, world.observe())
+    assert pf.recoveries == 1
+    assert pf.state.valid.mean() > 0.5 and np.isfinite(rec.ci_deg)

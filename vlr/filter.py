@@ -292,6 +292,7 @@ class ParticleFilter:
         self._project_cfg = replace(self.config.motion, jump_theta=self.config.init_jump_theta,
                                     jump_pos=0.05)
         self.project_status = np.zeros(5, dtype=np.int64)
+        self.recoveries = 0  # times every particle failed and the prior was resampled
         # Seconds per phase of the last iteration (motion, observation, weights, resampling,
         # jitter, summary), for `vlr bench`.
         self.timings: dict[str, float] = {}
@@ -338,6 +339,12 @@ class ParticleFilter:
             command: u_0 (N,) [m].
             nominal_theta: (N, K) [rad]; nominal_contact: (N, 2) (alpha, beta) [rad].
         """
+        self._sample_prior(observation, command, nominal_theta, nominal_contact)
+        return self._update(observation)
+
+    def _sample_prior(self, observation: PoseObservation, command: np.ndarray,
+                      nominal_theta: np.ndarray, nominal_contact: np.ndarray) -> None:
+        """The prior of `initialize`, settled at `command` (module docstring)."""
         cfg, m, rng = self.config, self.model, self.rng
         p = cfg.n_particles
         nf = m.n_fingers
@@ -359,7 +366,6 @@ class ParticleFilter:
         status, _ = self.motion.solve(state, self.command, init_cfg)
         self.timings = {"motion": time.perf_counter() - t0}
         self.init_status = np.bincount(status, minlength=5)
-        return self._update(observation)
 
     def step(self, command: np.ndarray, observation: PoseObservation | None) -> IterationRecord:
         """One iteration of Algorithm 1 for the new absolute command u_t (N,) [m].
@@ -371,8 +377,22 @@ class ParticleFilter:
         self.iteration += 1
         t0 = time.perf_counter()
         self.motion.solve(self.state, self.command)
+        if observation is not None and not self.state.valid.any():
+            self._recover(observation)
         self.timings = {"motion": time.perf_counter() - t0}
         return self._update(observation)
+
+    def _recover(self, observation: PoseObservation) -> None:
+        """Every particle's solve failed (all hypotheses left the model's reach, e.g. an
+        unknown stiffness far from the nominal): resample the prior about the last estimate,
+        at the current command and observation, rather than stop with no particle left."""
+        last = self.history[-1]
+        est = (last.posterior or last.prior).mean
+        nf, nk = self.model.n_fingers, self.model.n_joints
+        theta = est[:nf * nk].reshape(nf, nk)
+        contact = est[nf * nk:nf * nk + 2 * nf].reshape(nf, 2)
+        self._sample_prior(observation, self.command, theta, contact)
+        self.recoveries += 1
 
     def _update(self, observation: PoseObservation | None) -> IterationRecord:
         cfg, state, tm = self.config, self.state, self.timings
