@@ -29,7 +29,8 @@ TIMING = {"s_per_iteration", "s/iteration", "wall_s", "elapsed_s"}
 @pytest.fixture(scope="module")
 def ray_instance():
     ray = pytest.importorskip("ray")
-    ray.init(num_cpus=2, include_dashboard=False)
+    # address="local": our own instance, whatever `ray start` cluster this machine has.
+    ray.init(address="local", num_cpus=2, include_dashboard=False)
     yield ray
     ray.shutdown()
 

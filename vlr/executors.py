@@ -136,7 +136,9 @@ def run_ray(trials: list[Trial], out: Path, workers: int | None, on_done: OnDone
         else:
             # A local instance: workers share this machine's filesystem and environment
             # (numba cache in vlr/__pycache__, NUMBA_CACHE_DIR, MUJOCO_GL): no runtime_env.
-            ray.init(num_cpus=workers or os.cpu_count() or 1, **kwargs)
+            # address="local": a new instance even if a `ray start` cluster (or its stale
+            # /tmp/ray/ray_current_cluster) is on this machine.
+            ray.init(address="local", num_cpus=workers or os.cpu_count() or 1, **kwargs)
         started = True
     try:
         cpus = int(ray.cluster_resources().get("CPU", 1))
