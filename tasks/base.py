@@ -56,7 +56,7 @@ class HandTaskEnv(gym.Env):
         render_mode: None or "rgb_array" (a third-person view of the sim scene; on hardware
             the palm camera's frame).
         particles: particle count of the identification in reset.
-        identify_iterations: its iteration budget (it stops earlier on convergence).
+        identify_iterations: its exploratory moves (all are made, even after convergence).
         max_step: action bound per tendon and move [m].
         command_band: (release, pull): commands stay within [centre - release, centre +
             pull] of the task's centre command [m]. Releasing is what loses a fingertip
@@ -191,7 +191,10 @@ class HandTaskEnv(gym.Env):
             self.moves.append(Move(np.asarray(self.hand.commands, dtype=float).copy(), obs))
             return obs
 
+        # All `identify_iterations` exploratory moves are made even if the interval
+        # criterion holds earlier: the baseline fits its Jacobian correction to them.
         cfg = IdentifyConfig(max_iterations=self.identify_iterations,
+                             min_iterations=self.identify_iterations,
                              filter=FilterConfig(n_particles=self.particles, seed=filter_seed))
         try:
             self.identification = identify(self.hand, observer, model, obj,

@@ -9,9 +9,10 @@ leaves it (ground truth in the sim, the camera on hardware). The first waypoint 
 letter is the pen-down move from the previous letter's end and is not scored.
 
 Letter size: the paper's letters are at most 12 mm on the real hand. In our sim the apple's
-fingertip grasp moves the POM about 5 mm per mm of tendon, and commands more than about
-0.6 mm from the grasp command drop it (`command_band`), so the reachable patch is a few
-millimetres across: letters default to 3 mm (see docs/TASKS.md).
+fingertip grasp moves the POM about 5 mm per mm of tendon, and releasing a side finger's
+tendon by 0.4-0.6 mm from the grasp command loses its fingertip (`command_band`), so the
+reachable patch is a few millimetres across: letters default to 2 mm (3 mm letters run into
+the band's edge; docs/TASKS.md).
 """
 
 from __future__ import annotations
@@ -53,7 +54,7 @@ class HandwritingEnv(HandTaskEnv):
                                          tolerance_pos=0.1e-3)
 
     def __init__(self, backend: str = "sim", render_mode: str | None = None, *,
-                 word: str = "SCIENCE", letter_height: float = 3e-3, spacing: float = 1.5e-3,
+                 word: str = "SCIENCE", letter_height: float = 2e-3, spacing: float = 1.5e-3,
                  tolerance: float = 0.1e-3, steps_per_waypoint: int = 12, **kwargs: Any) -> None:
         super().__init__(backend, render_mode, **kwargs)
         if not word:

@@ -4,8 +4,9 @@ The hand holds the maze holder (models/objects/maze_holder.yaml: a handle, a pos
 80 mm plate with walls). The marble is placed at the start after identification, as in the
 paper. The path is a serpentine of five straight runs; each run has a precomputed plate
 orientation: the level plate (same yaw as after identification) tilted by `tilt_deg`
-downhill along the run. Walls stop the marble at the end of each run, where the next run
-starts, so the orientation schedule needs no marble sensing. Control is orientation-only
+downhill along the run, leaning a little towards the wall the marble should follow. Walls
+stop the marble at the end of each run, where the next run starts, so the orientation
+schedule needs no marble sensing. Control is orientation-only
 (the Jacobian's rotation rows). A run's target is reached when the camera puts the POM
 within `tolerance_deg` of it (or after `steps_per_run` moves); the plate then holds for
 `dwell` seconds while the marble rolls. The error recorded for a run is the angle between
@@ -38,8 +39,10 @@ WALLS: tuple[tuple[float, float, float, float], ...] = (
     (-_H, -_D, 0.024, -_D), (-0.024, _D, _H, _D))
 START = (-0.030, -0.027)                       # marble start in the plate frame [m]
 GOAL = (0.020, _D, _H, _H)                     # goal box (x0, y0, x1, y1) [m]
-# Downhill directions of the runs in the plate frame: right, up, left, up, right.
-RUNS: tuple[tuple[float, float], ...] = ((1, 0), (0, 1), (-1, 0), (0, 1), (1, 0))
+# Downhill directions of the runs in the plate frame: right, up, left, up, right, each with
+# a 0.3 component towards the wall the marble should follow (away from the gap it came
+# through), so that a control transient between two runs does not roll it back.
+RUNS: tuple[tuple[float, float], ...] = ((1, -0.3), (0.3, 1), (-1, 0.3), (-0.3, 1), (1, 0.3))
 
 
 def axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
@@ -104,7 +107,7 @@ class MarbleMazeEnv(HandTaskEnv):
         self.level = fix @ plate          # the plate levelled, yaw kept (camera-derived)
         self.targets = []
         for dx, dy in self.runs:
-            downhill = self.level @ np.array([dx, dy, 0.0])
+            downhill = self.level @ (np.array([dx, dy, 0.0]) / np.hypot(dx, dy))
             tilted = axis_angle(np.cross(up, downhill), self.tilt) @ self.level
             self.targets.append(tilted @ self.mount.T)           # the POM's target rotation
         self.run = 0
