@@ -135,3 +135,22 @@ def test_marble_maze_short_episode_rolls_the_marble_along_the_first_run():
         assert info["truth"]["marble_on_plate"][0] > 0.02   # rolled right, to the run's end
     finally:
         env.close()
+
+
+def test_handwriting_runs_on_the_hardware_backend_without_ground_truth():
+    """The hardware path (SDK, Protocol 2.0 packets, emulated motors driving the MuJoCo
+    hand; hardware/example_sim_config.yaml): no truth in info, errors from the camera."""
+    env = gym.make(tasks.HANDWRITING, backend="hardware",
+                   hardware_config="hardware/example_sim_config.yaml", word="I",
+                   render_mode="rgb_array", particles=1000, identify_iterations=3)
+    try:
+        obs, info = env.reset(seed=0)
+        assert "truth" not in info
+        policy = env.unwrapped.baseline()
+        for _ in range(3):
+            obs, reward, terminated, truncated, info = env.step(policy(obs))
+        assert "truth" not in info and np.isfinite(reward)
+        assert env.render().shape[2] == 3          # the palm camera's frame on hardware
+        assert env.unwrapped.metrics()["errors"]["source"] == "camera"
+    finally:
+        env.close()
