@@ -147,6 +147,15 @@ class HandTaskEnv(gym.Env):
         task controls position only."""
         return self._target()
 
+    def action_bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """The tendon changes [m] (low, high) that keep the commands inside the band and the
+        action space now: what `step` would clip an action to."""
+        release, pull = self.command_band
+        u = self.commands
+        low = np.maximum(self.action_space.low, self.center - release - u)
+        high = np.minimum(self.action_space.high, self.center + pull - u)
+        return np.minimum(low, 0.0), np.maximum(high, 0.0)
+
     @property
     def has_truth(self) -> bool:
         return hasattr(self.hand, "truth")

@@ -85,5 +85,5 @@ class VLRBaseline:
             self._seen = len(env.moves)
         pos, rot = env.target
         du = self.controller.act(env.pf.motion, env.pf.state, env.commands, env.observation,
-                                 pos, rot)
+                                 pos, rot, bounds=env.action_bounds())
         return np.clip(du, env.action_space.low, env.action_space.high)

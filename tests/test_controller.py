@@ -85,6 +85,24 @@ def test_step_scales_the_whole_change_to_the_step_limit_and_keeps_its_direction(
     np.testing.assert_allclose(du, [0.2e-3, -0.1e-3, 0.0], atol=1e-12)
 
 
+def test_step_holds_a_tendon_at_its_bound_and_solves_for_the_others():
+    """An active set: tendon 0 may not pull more than 0.05 mm; the other tendons make up
+    what they can, which beats clipping the unconstrained step."""
+    ctl = JacobianController(ControllerConfig(rows="position", method="dls", damping=1e-6,
+                                              gain=1.0, max_step=1e-3,
+                                              max_motion_pos=1.0))
+    jac = np.zeros((6, 3))
+    jac[:3] = [[2.0, 1.0, 0.0], [0.0, 2.0, 0.0], [0.0, 0.0, 2.0]]
+    err = np.array([0.6e-3, 0.0, 0.2e-3, 0, 0, 0])
+    lo, hi = np.full(3, -1e-3), np.array([0.05e-3, 1e-3, 1e-3])
+    du = ctl.step(jac, err, bounds=(lo, hi))
+    assert du[0] == pytest.approx(0.05e-3)
+    clipped = np.clip(ctl.step(jac, err), lo, hi)
+    left = np.linalg.norm(err[:3] - jac[:3] @ du)
+    assert left < np.linalg.norm(err[:3] - jac[:3] @ clipped) - 1e-6
+    np.testing.assert_allclose(du[2], 0.1e-3, rtol=1e-6)
+
+
 def test_config_rejects_unknown_rows_and_methods():
     with pytest.raises(ValueError, match="rows"):
         ControllerConfig(rows="yaw")

@@ -314,19 +314,40 @@ class JacobianController:
             ok &= bool(np.linalg.norm(error[3:]) <= cfg.tolerance_rot)
         return ok
 
-    def step(self, jacobian: np.ndarray, error: np.ndarray) -> np.ndarray:
+    def step(self, jacobian: np.ndarray, error: np.ndarray,
+             bounds: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """Tendon change (N,) [m] for a 6xN Jacobian and a 6-vector error (Eq. 11-12),
         scaled down as a whole so no tendon moves more than `max_step` and the predicted
-        POM motion stays in the trust region (`max_motion_pos`, `max_motion_rot`)."""
+        POM motion stays in the trust region (`max_motion_pos`, `max_motion_rot`).
+
+        `bounds` (low, high) (N,) [m], each low <= 0 <= high, are limits on the change (a
+        band the commands must stay in): a tendon whose step would cross its limit is held
+        at it and the step is solved again for the other tendons on the error left (an
+        active set), so that a tendon stuck at its limit does not block the others."""
         cfg = self.config
         rows = list(ROWS[cfg.rows])
         w = row_weights(cfg.rows, cfg.alpha)
         jw = w[:, None] * jacobian[rows] * _MM   # weighted units per mm of tendon
         ew = w * error[rows]
-        if cfg.method == "transpose":
-            du = transpose_step(jw, ew, cfg.gain)
-        else:
-            du = dls_step(jw, ew, cfg.damping, cfg.gain)
+        n = jacobian.shape[1]
+        lo, hi = ((np.full(n, -np.inf), np.full(n, np.inf)) if bounds is None else
+                  (np.asarray(bounds[0], dtype=float) / _MM,
+                   np.asarray(bounds[1], dtype=float) / _MM))
+        du = np.zeros(n)
+        free = np.ones(n, dtype=bool)
+        for _ in range(n):
+            rest = ew - jw[:, ~free] @ du[~free]
+            if cfg.method == "transpose":
+                du[free] = transpose_step(jw[:, free], rest, cfg.gain)
+            else:
+                du[free] = dls_step(jw[:, free], rest, cfg.damping, cfg.gain)
+            out = free & ((du < lo) | (du > hi))
+            if not out.any():
+                break
+            du[out] = np.clip(du[out], lo[out], hi[out])
+            free &= ~out
+            if not free.any():
+                break
         du = du * _MM
         biggest = float(np.max(np.abs(du))) if du.size else 0.0
         if biggest > cfg.max_step:
@@ -340,9 +361,10 @@ class JacobianController:
 
     def act(self, motion: MotionModel, state: ParticleState, command: np.ndarray,
             observation: PoseObservation, target_position: np.ndarray,
-            target_rotation: np.ndarray | None = None) -> np.ndarray:
+            target_rotation: np.ndarray | None = None,
+            bounds: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """The tendon change (N,) [m] towards the target: Jacobian (Eq. 10) on the filter's
-        particles at the current command, then `step`."""
+        particles at the current command, then `step` (with its optional `bounds`)."""
         cfg = self.config
         try:
             self.last_jacobian = numerical_jacobian(motion, state, command, cfg.jacobian_eps,
@@ -353,7 +375,7 @@ class JacobianController:
             # Every sampled particle's solve failed here (a stop or a slack tendon close
             # by): keep the last Jacobian; the camera still closes the loop.
         return self.step(self.jacobian, self.error(observation, target_position,
-                                                   target_rotation))
+                                                   target_rotation), bounds)
 
 
 # --------------------------------------------------------------------------- the loop
