@@ -50,7 +50,7 @@ def main(argv: list[str] | None = None) -> int:
     results = []
     for d in dirs:
         f = d / "result.json" if d.is_dir() else d
-        if f.is_file():
+        if f.is_file() and f.suffix == ".json":
             results.append(json.loads(f.read_text()))
     if not results:
         print("no result.json found", file=sys.stderr)
