@@ -47,15 +47,3 @@ def test_truth_is_used_only_for_scoring(modelo):
     a, b = run(True), run(False)
     assert len(a.scores) == len(a.history) and not b.scores
     np.testing.assert_array_equal(a.history[-1].posterior.mean, b.history[-1].posterior.mean)
-
-
-@pytest.mark.slow
-def test_filter_converges_towards_truth(modelo):
-    world = SyntheticWorld(modelo, OBJ, SyntheticConfig(seed=0))
-    cfg = IdentifyConfig(max_iterations=12, stop_on_convergence=False,
-                         filter=FilterConfig(n_particles=3000, seed=0))
-    res = identify(world, world.observe, modelo, OBJ, world.nominal, cfg, truth=world.truth)
-    first, last = res.scores[0], res.scores[-1]
-    assert res.history[-1].ci_deg < res.history[0].ci_deg
-    assert np.mean(last.theta_error_deg) < np.mean(first.theta_error_deg) + 0.5
-    assert np.mean(last.theta_covered) >= 5 / 6

@@ -9,7 +9,6 @@ so the numbers are those of a real identification run's iterations.
 from __future__ import annotations
 
 import argparse
-import json
 import time
 from pathlib import Path
 
@@ -61,7 +60,15 @@ def bench_one(n_particles: int, repeats: int, seed: int = 0) -> dict[str, float]
 
 
 def run(args: argparse.Namespace) -> int:
+    from vlr.errors import UserError
+
+    bad = [n for n in args.particles if n < 10]
+    if bad:
+        raise UserError(f"--particles {bad[0]} must be >= 10")
+    if args.repeats < 1:
+        raise UserError(f"--repeats {args.repeats} must be >= 1")
     from vlr._energy_kernels import solve_batch  # noqa: F401  (compile/load the cache first)
+    from vlr.io import write_json_atomic
 
     results: dict[int, dict[str, float]] = {}
     header = f"{'particles':>10} " + " ".join(f"{k:>11}" for k in (*PHASES, "total",
@@ -73,6 +80,5 @@ def run(args: argparse.Namespace) -> int:
         print(f"{n:>10} " + " ".join(f"{med[k]:>10.4f}s" for k in (*PHASES, "total",
                                                                     "summary")), flush=True)
     if args.json is not None:
-        args.json.write_text(json.dumps({str(n): r["total"] for n, r in results.items()},
-                                        indent=2) + "\n")
+        write_json_atomic(args.json, {str(n): r["total"] for n, r in results.items()})
     return 0
