@@ -292,6 +292,7 @@ class ParticleFilter:
         self._project_cfg = replace(self.config.motion, jump_theta=self.config.init_jump_theta,
                                     jump_pos=0.05)
         self.project_status = np.zeros(5, dtype=np.int64)
+        self.newton_iterations: dict[str, float] = {}
         self.recoveries = 0  # times every particle failed and the prior was resampled
         # Seconds per phase of the last iteration (motion, observation, weights, resampling,
         # jitter, summary), for `vlr bench`.
@@ -376,7 +377,10 @@ class ParticleFilter:
         self.command = np.asarray(command, dtype=float).copy()
         self.iteration += 1
         t0 = time.perf_counter()
-        self.motion.solve(self.state, self.command)
+        _, iters = self.motion.solve(self.state, self.command)
+        # Median Newton iterations of the action solve and of the post-jitter settle
+        # (`vlr bench` reports them: they are what a filter iteration costs).
+        self.newton_iterations = {"action": float(np.median(iters))}
         if observation is not None and not self.state.valid.any():
             self._recover(observation)
         self.timings = {"motion": time.perf_counter() - t0}
@@ -472,8 +476,9 @@ class ParticleFilter:
         keeps each particle's POM where it was observed, so the next update weighs only the
         action's effect, and the next solve is short."""
         pos, rot = state.pos.copy(), state.rot.copy()
-        status, _ = self.motion.solve(state, self.command, self._project_cfg)
+        status, iters = self.motion.solve(state, self.command, self._project_cfg)
         self.project_status = np.bincount(status, minlength=5)
+        self.newton_iterations["settle"] = float(np.median(iters))
         state.pos[...] = pos
         state.rot[...] = rot
         state.anchor_to_pose(self.model)

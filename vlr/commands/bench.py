@@ -54,6 +54,7 @@ def bench_one(n_particles: int, repeats: int, seed: int = 0) -> dict[str, float]
         row = dict(pf.timings)
         row["total"] = sum(row[k] for k in PHASES)
         row["wall"] = wall
+        row.update({f"newton_{k}": v for k, v in pf.newton_iterations.items()})
         rows.append(row)
     rows = rows[1:]
     return {k: float(np.median([r[k] for r in rows])) for k in rows[0]}
@@ -71,14 +72,17 @@ def run(args: argparse.Namespace) -> int:
     from vlr.io import write_json_atomic
 
     results: dict[int, dict[str, float]] = {}
-    header = f"{'particles':>10} " + " ".join(f"{k:>11}" for k in (*PHASES, "total",
-                                                                     "summary"))
+    header = (f"{'particles':>10} " + " ".join(f"{k:>11}" for k in (*PHASES, "total",
+                                                                      "summary"))
+              + "   Newton iterations (action, settle)")
     print(header)
     for n in args.particles:
         med = bench_one(n, args.repeats, args.seed)
         results[n] = med
         print(f"{n:>10} " + " ".join(f"{med[k]:>10.4f}s" for k in (*PHASES, "total",
-                                                                    "summary")), flush=True)
+                                                                    "summary"))
+              + f"   {med.get('newton_action', float('nan')):.0f}, "
+              f"{med.get('newton_settle', float('nan')):.0f}", flush=True)
     if args.json is not None:
         write_json_atomic(args.json, {str(n): r["total"] for n, r in results.items()})
     return 0
