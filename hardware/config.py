@@ -13,11 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
 
-import yaml
-
 from hardware.bus import SDK_BAUD_RATES
 from hardware.control_table import EXTENDED_POSITION_LIMIT, OperatingMode
-from vlr.spec import SpecError, load_hand
+from vlr.spec import SpecError, load_hand, load_yaml_mapping
 
 #: `bus.port` value that runs the bus against an in-process emulator (a dry run).
 EMULATOR_PORT = "emulator"
@@ -257,12 +255,7 @@ class _Section:
 def load_config(path: str | Path) -> HardwareConfig:
     """Read and validate a hardware config YAML file."""
     path = Path(path)
-    if not path.is_file():
-        raise HardwareConfigError(f"hardware config file {path} does not exist")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise HardwareConfigError(f"{path} is not valid YAML: {exc}") from None
+    data = load_yaml_mapping(path, "hardware config file", HardwareConfigError)
     top = _Section(data, "", path)
     base = path.parent
 

@@ -97,3 +97,27 @@ def test_cli_prints_config_errors_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("vlr emulate: error:") and "bus.baud" in err
     assert "Traceback" not in err
+
+
+def test_cli_prints_a_bad_camera_calibration_in_one_line(tmp_path, capsys):
+    from vlr.cli import main
+
+    (tmp_path / "cam.yaml").write_text("width: 640\n")
+    data = config_dict()
+    data["camera"]["calibration"] = "cam.yaml"
+    path = write_config(tmp_path, data)
+    out = tmp_path / "out"
+    assert main(["identify", "--backend", "hardware", "--config", str(path), "--out",
+                 str(out), "--particles", "100"]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("vlr identify: error: calibration file") and "height" in err
+    assert "Traceback" not in err and not out.exists()
+
+
+def test_unreadable_config_is_named(tmp_path):
+    (tmp_path / "dir.yaml").mkdir()
+    with pytest.raises(HardwareConfigError, match="dir.yaml is not a file"):
+        load_config(tmp_path / "dir.yaml")
+    (tmp_path / "list.yaml").write_text("- 1\n")
+    with pytest.raises(HardwareConfigError, match="must hold a mapping, got list"):
+        load_config(tmp_path / "list.yaml")

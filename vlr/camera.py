@@ -44,6 +44,8 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
+from vlr.spec import SpecError, load_yaml_mapping
+
 __all__ = [
     "CalibrationError",
     "CameraCalibration",
@@ -66,8 +68,9 @@ _ROTATION_TOL = 1e-6
 _DIST_LENGTHS = (4, 5, 8, 12, 14)  # what OpenCV's distortion models accept
 
 
-class CalibrationError(ValueError):
-    """A calibration value or file is invalid; the message names the bad key/value (and file)."""
+class CalibrationError(SpecError):
+    """A calibration value or file is invalid; the message names the bad key/value (and file).
+    A ValueError, and a SpecError so that the CLI prints it as one line."""
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -273,13 +276,7 @@ def load_calibration(path: str | Path) -> CameraCalibration:
     Raises:
         CalibrationError: (a ValueError) naming the file and the bad key or value.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise CalibrationError(f"calibration file {path} does not exist")
-    try:
-        data = yaml.safe_load(path.read_text())
-    except yaml.YAMLError as exc:
-        raise CalibrationError(f"calibration file {path} is not valid YAML: {exc}") from None
+    data = load_yaml_mapping(path, "calibration file", CalibrationError)
     try:
         return _calibration_from_dict(data)
     except CalibrationError as exc:

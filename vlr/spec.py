@@ -47,6 +47,7 @@ __all__ = [
     "available_hands",
     "available_objects",
     "available_fingers",
+    "load_yaml_mapping",
 ]
 
 
@@ -227,16 +228,26 @@ def _require(ok: bool, message: str) -> None:
 
 # --------------------------------------------------------------------------- YAML loading
 
-def _read_yaml(path: Path) -> dict[str, Any]:
+def load_yaml_mapping(path: str | Path, what: str,
+                      error: type[Exception] = SpecError) -> dict[str, Any]:
+    """The mapping in YAML file `path`, or `error` naming `what` ("spec file", ...) and the
+    path: missing, unreadable, not YAML, or not a mapping. Shared by every YAML loader."""
+    path = Path(path)
     if not path.is_file():
-        raise SpecError(f"spec file {path} does not exist")
+        raise error(f"{what} {path} {'is not a file' if path.exists() else 'does not exist'}")
     try:
         data = yaml.safe_load(path.read_text())
     except yaml.YAMLError as exc:
-        raise SpecError(f"spec file {path} is not valid YAML: {exc}") from None
+        raise error(f"{what} {path} is not valid YAML: {exc}") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise error(f"{what} {path} cannot be read: {exc}") from None
     if not isinstance(data, dict):
-        raise SpecError(f"spec file {path} must hold a mapping, got {type(data).__name__}")
+        raise error(f"{what} {path} must hold a mapping, got {type(data).__name__}")
     return data
+
+
+def _read_yaml(path: Path) -> dict[str, Any]:
+    return load_yaml_mapping(path, "spec file")
 
 
 def _get(data: dict[str, Any], key: str, path: Path, kind: type | tuple = (int, float),
@@ -246,12 +257,26 @@ def _get(data: dict[str, Any], key: str, path: Path, kind: type | tuple = (int, 
     value = data[key]
     if length is None:
         if not isinstance(value, kind) or isinstance(value, bool):
-            raise SpecError(f"{path}: {key} = {value!r} must be a number")
+            noun = {str: "a string", int: "an integer"}.get(kind, "a number")
+            raise SpecError(f"{path}: {key} = {value!r} must be {noun}")
         if isinstance(value, (int, float)) and not math.isfinite(value):
             raise SpecError(f"{path}: {key} = {value!r} must be finite")
         return value
     if not isinstance(value, (list, tuple)) or len(value) != length:
         raise SpecError(f"{path}: {key} = {value!r} must be a list of {length}")
+    return value
+
+
+def _opt_number(data: dict[str, Any], key: str, default: float, path: Path) -> float:
+    """An optional finite number (`default` when absent)."""
+    return float(_get(data, key, path)) if key in data else default
+
+
+def _opt_mapping(data: dict[str, Any], key: str, path: Path) -> dict[str, Any]:
+    """An optional mapping ({} when absent or empty)."""
+    value = data.get(key) or {}
+    if not isinstance(value, dict):
+        raise SpecError(f"{path}: {key} = {value!r} must be a mapping")
     return value
 
 
@@ -269,6 +294,8 @@ def _vec(value: Any, n: int, where: str) -> tuple[float, ...]:
 def _resolve_mesh(entry: Any, base: Path, where: str) -> str | None:
     if entry is None:
         return None
+    if not isinstance(entry, str):
+        raise SpecError(f"{where}: mesh {entry!r} must be a file path")
     p = Path(entry)
     if not p.is_absolute():
         p = (base / p).resolve()
@@ -282,7 +309,7 @@ def finger_from_dict(data: dict[str, Any], path: Path) -> FingerSpec:
     base = path.parent
     where = str(path)
     limits = _get(data, "limits", path, length=2)
-    meshes = data.get("meshes", {}) or {}
+    meshes = _opt_mapping(data, "meshes", path)
     try:
         return FingerSpec(
             name=str(data.get("name", path.stem)),
@@ -302,7 +329,7 @@ def finger_from_dict(data: dict[str, Any], path: Path) -> FingerSpec:
             link_coms=(_vec(_get(data, "link_coms", path, length=2)[0], 3,
                             f"{where}: link_coms[0]"),
                        _vec(data["link_coms"][1], 3, f"{where}: link_coms[1]")),
-            link_width=float(data.get("link_width", 0.018)),
+            link_width=_opt_number(data, "link_width", 0.018, path),
             visual_meshes=(_resolve_mesh(meshes.get("proximal_visual"), base, where),
                            _resolve_mesh(meshes.get("distal_visual"), base, where)),
             collision_meshes=(_resolve_mesh(meshes.get("proximal_collision"), base, where),
@@ -380,7 +407,7 @@ def load_hand(name_or_path: str | Path) -> HandSpec:
                                   yaw=float(yaw), finger=finger))
     spec = HandSpec(name=str(data.get("name", path.stem)), mounts=tuple(mounts),
                     tendon_stiffness=float(_get(data, "tendon_stiffness", path)),
-                    spread=float(data.get("spread", 0.0)))
+                    spread=_opt_number(data, "spread", 0.0, path))
     return spec
 
 
@@ -403,10 +430,10 @@ def load_object(name_or_path: str | Path) -> ObjectSpec:
             tag_size=float(_get(data, "tag_size", path)),
             grasp_height=float(_get(data, "grasp_height", path)),
             mesh=mesh,
-            friction=float(data.get("friction", 1.0)),
+            friction=_opt_number(data, "friction", 1.0, path),
             ycb=data.get("ycb"),
             rgba=_vec(data.get("rgba", [0.8, 0.2, 0.2, 1.0]), 4, f"{path}: rgba"),
-            extras=dict(data.get("extras", {}) or {}),
+            extras=dict(_opt_mapping(data, "extras", path)),
         )
     except SpecError as exc:
         raise SpecError(f"{path}: {exc}") from None
