@@ -287,10 +287,9 @@ class HardwareHand:
         image = self.camera.read()
         if image is None:
             return True, ""  # no frame: unknown, so not a failure
-        from vlr.perception.detect import detect_tags
+        from vlr.perception import detect_tags, to_gray
 
-        gray = image if image.ndim == 2 else image.mean(axis=2).astype(np.uint8)
-        if any(d.tag_id == self._object.tag_id for d in detect_tags(gray)):
+        if any(d.tag_id == self._object.tag_id for d in detect_tags(to_gray(image))):
             return True, ""
         return False, (f"the object's tag (36h11 id {self._object.tag_id}) is not seen by the "
                        "palm camera")

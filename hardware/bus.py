@@ -46,12 +46,13 @@ from hardware.control_table import (
     describe_status_error,
 )
 from hardware.protocol2 import BROADCAST_ID, Instruction
-from vlr.cli import UserError
+from vlr.errors import UserError
 
 #: Baud rates the SDK accepts (it refuses others before touching the port).
 SDK_BAUD_RATES = (9_600, 19_200, 38_400, 57_600, 115_200, 230_400, 460_800, 500_000, 576_000,
                   921_600, 1_000_000, 1_152_000, 2_000_000, 2_500_000, 3_000_000, 3_500_000,
                   4_000_000)
+
 
 class HardwareError(UserError):
     """A hardware problem the user can fix (port, cable, power, motor id, motor fault)."""

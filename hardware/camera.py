@@ -33,7 +33,8 @@ class OpenCVCamera:
 
     Args:
         index: OpenCV device index (/dev/video<index> on Linux).
-        width, height: requested image size [px] (should match the calibration).
+        width, height: requested image size [px] (the calibration's); a frame of another
+            size raises `CameraError`.
         drain: frames grabbed and dropped before each retrieve: drivers that ignore
             CAP_PROP_BUFFERSIZE = 1 still queue a few frames.
     """
@@ -45,6 +46,7 @@ class OpenCVCamera:
         self._cv2 = cv2
         self.index = index
         self.drain = drain
+        self.size = (width, height) if width and height else None
         self.cap = cv2.VideoCapture(index)
         if not self.cap.isOpened():
             self.cap.release()
@@ -64,6 +66,12 @@ class OpenCVCamera:
         ok, image = self.cap.retrieve()
         if not ok or image is None:
             return None
+        if self.size is not None and (image.shape[1], image.shape[0]) != self.size:
+            # The driver ignored the requested size: the calibration would not fit the image.
+            raise CameraError(f"camera {self.index} delivers {image.shape[1]}x{image.shape[0]} "
+                              f"frames, not the calibration's {self.size[0]}x{self.size[1]}: "
+                              "calibrate at the size the camera delivers, or pick a size it "
+                              "supports (v4l2-ctl --list-formats-ext)")
         return self._cv2.cvtColor(image, self._cv2.COLOR_BGR2RGB)
 
     def close(self) -> None:

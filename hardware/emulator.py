@@ -72,6 +72,9 @@ _FACTORY = {
 }
 
 
+_MODES = frozenset(int(m) for m in OperatingMode)
+
+
 def rpm_to_ticks_per_s(rpm: float) -> float:
     return rpm / 60.0 * TICKS_PER_REV
 
@@ -191,7 +194,7 @@ class EmulatedMotor:
         scratch = bytearray(self.table)
         scratch[address:end] = data
         new = {r: r.decode(scratch[r.address: r.address + r.size]) for r in touched}
-        if Reg.OPERATING_MODE in new and new[Reg.OPERATING_MODE] not in set(OperatingMode):
+        if Reg.OPERATING_MODE in new and new[Reg.OPERATING_MODE] not in _MODES:
             return ERR_DATA_RANGE
         if Reg.TORQUE_ENABLE in new and new[Reg.TORQUE_ENABLE] not in (0, 1):
             return ERR_DATA_RANGE
@@ -460,6 +463,8 @@ class Emulator:
             for m in targets:
                 m.reboot()
             return reply
+        if inst in (Instruction.SYNC_READ, Instruction.SYNC_WRITE) and len(params) < 4:
+            return b""  # too short to name an address and a length: no motor can answer
         if inst == Instruction.SYNC_READ and not unicast:
             address, length = _u16(params, 0), _u16(params, 2)
             out = []

@@ -125,21 +125,19 @@ class PacketParser:
 
     def _next(self) -> Packet | None:
         buf = self._buf
-        start = buf.find(HEADER[:3])
-        if start < 0:
-            # Keep a possible partial header at the end.
-            del buf[: max(0, len(buf) - 2)]
-            return None
-        del buf[:start]
-        if len(buf) < 7:
-            return None
-        if buf[3] != 0x00:
+        while True:  # a loop, not recursion: a long run of false headers is just skipped
+            start = buf.find(HEADER[:3])
+            if start < 0:
+                # Keep a possible partial header at the end.
+                del buf[: max(0, len(buf) - 2)]
+                return None
+            del buf[:start]
+            if len(buf) < 7:
+                return None
+            length = buf[5] | (buf[6] << 8)
+            if buf[3] == 0x00 and 3 <= length <= self.MAX_LENGTH:
+                break
             del buf[:1]
-            return self._next()
-        length = buf[5] | (buf[6] << 8)
-        if length < 3 or length > self.MAX_LENGTH:
-            del buf[:1]
-            return self._next()
         total = 7 + length
         if len(buf) < total:
             return None

@@ -39,6 +39,13 @@ def all_off(emulator) -> bool:
     return not any(emulator.torque().values())
 
 
+def _start_hand(cfg, emu) -> HardwareHand:
+    """A hand on a started emulator (for start-up failures; a success would leak it)."""
+    return HardwareHand(cfg, spec=load_hand("modelo"), object_spec=OBJECT,
+                        calibration=CALIBRATION, camera=FakeCamera(), port=emu.port,
+                        log=lambda m: None)
+
+
 def test_calibration_finds_the_taut_point(tmp_path):
     cfg = make_config(tmp_path)
     with hand_on_emulator(cfg) as (hand, emu):
@@ -132,9 +139,7 @@ def test_fault_at_start_up_is_reported(tmp_path):
     emu.inject_hardware_error(3)
     with emu, pytest.raises(MotorFaultError, match=r"motor 3 \(right\) is in a hardware error "
                                                    r"state.*bit 5 overload"):
-        HardwareHand(cfg, spec=load_hand("modelo"), object_spec=OBJECT,
-                     calibration=CALIBRATION, camera=FakeCamera(), port=emu.port,
-                     log=lambda m: None)
+        _start_hand(cfg, emu)
     assert all_off(emu)
 
 
@@ -145,9 +150,7 @@ def test_missing_motor_at_start_up_is_named(tmp_path):
     emu, _ = build_emulator(cfg)
     emu.silence(4)
     with emu, pytest.raises(CommError, match=r"motor 4 \(spread\) does not answer \(ping\)"):
-        HardwareHand(cfg, spec=load_hand("modelo"), object_spec=OBJECT,
-                     calibration=CALIBRATION, camera=FakeCamera(), port=emu.port,
-                     log=lambda m: None)
+        _start_hand(cfg, emu)
     assert all_off(emu)
 
 
@@ -161,9 +164,7 @@ def test_a_line_that_never_goes_taut(tmp_path):
     plant.directions[3] = 1  # the motor really winds with +ticks
     plant.taut[3] = 2048 + 0.002 * PER_METRE
     with emu, pytest.raises(CalibrationError, match=r"right \(motor 3\) never became taut"):
-        HardwareHand(cfg, spec=load_hand("modelo"), object_spec=OBJECT,
-                     calibration=CALIBRATION, camera=FakeCamera(), port=emu.port,
-                     log=lambda m: None)
+        _start_hand(cfg, emu)
     assert all_off(emu)
 
 
@@ -255,3 +256,32 @@ def test_emulate_command_serves_and_stops(tmp_path, capsys):
     out = capsys.readouterr().out
     assert "emulating motors [1, 2, 3, 4]" in out and "/dev/pts/" in out
     assert time.monotonic() - t0 < 5
+
+
+def test_a_camera_that_ignores_the_size_is_refused(monkeypatch):
+    import cv2
+
+    class Capture:  # a driver that delivers 320x240 whatever is asked
+        def __init__(self, index):
+            pass
+
+        def isOpened(self):  # noqa: N802 (OpenCV's names)
+            return True
+
+        def set(self, prop, value):
+            return True
+
+        def grab(self):
+            return True
+
+        def retrieve(self):
+            return True, np.zeros((240, 320, 3), np.uint8)
+
+        def release(self):
+            pass
+
+    monkeypatch.setattr(cv2, "VideoCapture", Capture)
+    assert OpenCVCamera(0, 320, 240).read().shape == (240, 320, 3)
+    with pytest.raises(CameraError, match="delivers 320x240 frames, not the calibration's "
+                                          "640x480"):
+        OpenCVCamera(0, 640, 480).read()

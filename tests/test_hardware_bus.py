@@ -52,6 +52,9 @@ def test_stuffing_round_trip_and_parser_resync():
     bad = packet[:-1] + bytes([packet[-1] ^ 1])
     (q,) = parser.feed(bad)
     assert not q.crc_ok
+    # A long run of false headers (bad reserved byte) is skipped, not recursed into.
+    (r,) = parser.feed(b"\xff\xff\xfd\x01" * 5000 + packet)
+    assert r.crc_ok and r.params == body[1:]
 
 
 def test_ping_read_write_sync(bus, emu):
