@@ -64,6 +64,15 @@ class SimOptions:
     settle_window: int = 30
     overrides: dict[str, float] = field(default_factory=dict)
 
+    def __post_init__(self) -> None:
+        for name in ("width", "height"):
+            v = getattr(self, name)
+            if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 16 <= v <= 8192:
+                raise SpecError(f"SimOptions.{name} = {v!r} must be an integer in [16, 8192] "
+                                "[px]")
+        if not (isinstance(self.fovy_deg, (int, float)) and 0 < self.fovy_deg < 180):
+            raise SpecError(f"SimOptions.fovy_deg = {self.fovy_deg!r} must be in (0, 180)")
+
 
 def apply_overrides(hand: HandSpec, overrides: dict[str, float]) -> HandSpec:
     """The true hand: `hand` with overridden parameters ("thumb.distal.stiffness": 0.05)."""

@@ -9,12 +9,15 @@ render and detect time per frame (medians).
 from __future__ import annotations
 
 import argparse
+import math
 import time
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
 from vlr.perception import observe
 
@@ -113,8 +116,6 @@ def _dist(d: dict, digits: int) -> str:
 
 
 def _size(text: str) -> tuple[int, int]:
-    from vlr.cli import UserError
-
     try:
         w, h = (int(v) for v in text.lower().split("x"))
     except ValueError:
@@ -125,20 +126,27 @@ def _size(text: str) -> tuple[int, int]:
 
 
 def run(args: argparse.Namespace) -> int:
-    from vlr.cli import UserError
+    from vlr.spec import load_object
 
     width, height = _size(args.size)
     if args.actions < 0:
         raise UserError(f"--actions {args.actions} must be >= 0")
+    if not math.isfinite(args.noise) or args.noise < 0:
+        raise UserError(f"--noise {args.noise} must be a finite number >= 0")
+    if args.json and not Path(args.json).resolve().parent.is_dir():
+        raise UserError(f"--json {args.json}: its folder does not exist")
+    objects = [o.strip() for o in args.objects.split(",") if o.strip()]
+    if not objects:
+        raise UserError(f"--objects {args.objects!r} names no object")
+    for obj in objects:  # every name checked before minutes of rendering
+        load_object(obj)
     effects = None
     if args.noise:
-        if args.noise < 0:
-            raise UserError(f"--noise {args.noise} must be >= 0")
         from sim.camera_effects import CameraEffects
 
         effects = CameraEffects(noise_std=args.noise)
     reports = []
-    for obj in [o.strip() for o in args.objects.split(",") if o.strip()]:
+    for obj in objects:
         r = camera_trial(obj, actions=args.actions, seed=args.seed, width=width,
                          height=height, effects=effects)
         s = r.summary()

@@ -7,6 +7,7 @@ import time
 
 import numpy as np
 
+from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
 
 
@@ -22,8 +23,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from sim.backend import SimHand
-    from vlr.cli import UserError
-
     if args.actions < 0:
         raise UserError(f"--actions {args.actions} must be >= 0")
     t0 = time.perf_counter()

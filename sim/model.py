@@ -338,10 +338,13 @@ def load_scene(hand: str, obj: str, *, width: int = 640, height: int = 480,
     return _cached(str(hand), str(obj), width, height, float(fovy_deg))
 
 
-def write_scene_files() -> None:
-    """Write models/modelo.xml (hand only, with the apple) for users who open MJCF directly."""
+def write_scene_files(folder: str | Path | None = None) -> Path:
+    """Write the Model O holding the apple as MJCF with its meshes and textures beside it
+    (default folder models/scene_modelo_apple/), for users who open MJCF directly; returns
+    the XML's path. The XML alone would not load: it names its assets by content hash."""
     from vlr.spec import load_hand, load_object
 
+    out = Path(folder) if folder is not None else models.ROOT / "scene_modelo_apple"
     root = build_scene(load_hand("modelo"), load_object("apple"))
-    out = models.ROOT / "scene_modelo_apple.xml"
-    out.write_text(root.to_xml_string())
+    mjcf.export_with_assets(root, str(out), "scene_modelo_apple.xml")
+    return out / "scene_modelo_apple.xml"

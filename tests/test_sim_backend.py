@@ -110,3 +110,30 @@ def test_bad_tendon_commands_are_refused_without_moving():
 def test_unknown_override_is_refused():
     with pytest.raises(SpecError, match="override"):
         SimHand("apple", options=SimOptions(overrides={"thumb.middle.stiffness": 0.1}))
+
+
+@pytest.mark.parametrize("kwargs, match", [
+    (dict(width=0), "width = 0"), (dict(height=480.5), "height = 480.5"),
+    (dict(fovy_deg=180.0), "fovy_deg = 180.0"),
+])
+def test_bad_sizes_are_refused(kwargs, match):
+    with pytest.raises(SpecError, match=match):
+        SimOptions(**kwargs)
+
+
+def test_bad_values_in_spec_files_are_named(tmp_path):
+    from vlr.spec import load_hand, load_object
+
+    obj = tmp_path / "obj.yaml"
+    obj.write_text("shape: sphere\nsize: [0.03]\nmass: 0.05\ncom: [0, 0, 0.03]\ntag_id: 3\n"
+                   "tag_size: 0.02\ngrasp_height: 0.08\nfriction: high\n")
+    with pytest.raises(SpecError, match="friction = 'high' must be a number"):
+        load_object(obj)
+    obj.write_text(obj.read_text().replace("friction: high", "extras: [1]"))
+    with pytest.raises(SpecError, match=r"extras = \[1\] must be a mapping"):
+        load_object(obj)
+    hand = tmp_path / "hand.yaml"
+    hand.write_text("tendon_stiffness: 20000\nspread: wide\n"
+                    "slots: [{slot: a, position: [0, 0, 0], yaw: 0, finger: modelo}]\n")
+    with pytest.raises(SpecError, match="spread = 'wide' must be a number"):
+        load_hand(hand)
