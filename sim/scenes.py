@@ -165,8 +165,9 @@ class MazeHand(SimHand):
 
     def wait(self, seconds: float) -> None:
         """Let time pass with the tendon commands held (the marble rolls)."""
-        for _ in range(int(round(seconds / self.model.opt.timestep))):
-            mujoco.mj_step(self.model, self.data)
+        n = int(round(seconds / self.model.opt.timestep))
+        if n > 0:
+            mujoco.mj_step(self.model, self.data, nstep=n)
 
     def marble_on_plate(self) -> np.ndarray:
         """Ground truth: the marble centre in the plate frame [m] (scoring only)."""
