@@ -29,6 +29,7 @@ import numpy as np
 from gymnasium import spaces
 
 from vlr.controller import ControllerConfig, rotation_log
+from vlr.errors import UserError
 
 __all__ = ["Move", "HandTaskEnv", "pose_vector", "save_figure"]
 
@@ -90,6 +91,8 @@ class HandTaskEnv(gym.Env):
                              f"{self.metadata['render_modes']}")
         if particles < 10 or identify_iterations < 0:
             raise ValueError("particles must be >= 10 and identify_iterations >= 0")
+        if not max_step > 0:
+            raise ValueError(f"max_step {max_step!r} must be > 0 [m]")
         self.backend = backend
         self.render_mode = render_mode
         self.particles = int(particles)
@@ -224,7 +227,12 @@ class HandTaskEnv(gym.Env):
         # commands anywhere in its band), plus the squeeze.
         self.center = self.moves[0].commands + self.squeeze
         while np.max(np.abs(self.center - self.commands)) > 1e-9 and not self.grasp_lost:
+            before = self.commands
             self._apply(np.clip(self.center - self.commands, -self.max_step, self.max_step))
+            if np.array_equal(before, self.commands):   # the backend clipped the move away
+                raise UserError(f"the task's centre command {np.round(self.center * 1e3, 3)}"
+                                " mm cannot be reached (the backend's command range; "
+                                "squeeze?)")
         self._start_task()
         return self._get_obs(), self._info()
 
@@ -332,18 +340,10 @@ class HandTaskEnv(gym.Env):
 
 
 def save_figure(fig, path) -> None:
-    """Save a matplotlib figure atomically (temporary file in the same folder, then rename)."""
-    import os
-    import tempfile
+    """Save a matplotlib figure atomically (temporary file in the same folder, then rename),
+    readable by others, and close it: the project's picture writer (`vlr.plots`)."""
     from pathlib import Path
 
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
-    try:
-        fig.savefig(tmp, dpi=110)
-        os.replace(tmp, path)
-    finally:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
+    from vlr.plots import _save
+
+    _save(fig, Path(path))

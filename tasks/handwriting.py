@@ -60,8 +60,8 @@ class HandwritingEnv(HandTaskEnv):
                  word: str = "SCIENCE", letter_height: float = 2e-3, spacing: float = 1.5e-3,
                  tolerance: float = 0.1e-3, steps_per_waypoint: int = 12, **kwargs: Any) -> None:
         super().__init__(backend, render_mode, **kwargs)
-        if not word:
-            raise ValueError("word must not be empty")
+        if not isinstance(word, str) or not word:
+            raise ValueError(f"word {word!r} must be a non-empty string")
         if letter_height <= 0 or spacing <= 0 or tolerance <= 0 or steps_per_waypoint < 1:
             raise ValueError("letter_height, spacing, tolerance and steps_per_waypoint must be "
                              "positive")
@@ -188,5 +188,4 @@ class HandwritingEnv(HandTaskEnv):
                      fontsize=10)
         fig.tight_layout()
         save_figure(fig, path)
-        plt.close(fig)
 

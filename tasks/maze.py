@@ -27,6 +27,8 @@ import numpy as np
 
 from tasks.base import HandTaskEnv, save_figure
 from vlr.controller import ControllerConfig, rotation_log
+from vlr.errors import UserError
+from vlr.motion import rotvec_to_matrix
 from vlr.observation import rotation_angle
 
 __all__ = ["WALLS", "START", "GOAL", "RUNS", "MarbleMazeEnv", "axis_angle"]
@@ -46,11 +48,10 @@ RUNS: tuple[tuple[float, float], ...] = ((1, -0.3), (0.3, 1), (-1, 0.3), (-0.3, 
 
 
 def axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
-    """Rotation matrix of `angle` [rad] about the unit `axis` (Rodrigues)."""
+    """Rotation matrix of `angle` [rad] about `axis` (normalised here; Rodrigues,
+    `vlr.motion.rotvec_to_matrix`)."""
     a = np.asarray(axis, dtype=float)
-    a = a / np.linalg.norm(a)
-    k = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
+    return rotvec_to_matrix(a * (angle / np.linalg.norm(a)))
 
 
 class MarbleMazeEnv(HandTaskEnv):
@@ -91,7 +92,14 @@ class MarbleMazeEnv(HandTaskEnv):
             from sim.scenes import MazeHand
 
             return MazeHand(WALLS, object=self.object_name, seed=0)
-        return super()._open_hand()
+        hand = super()._open_hand()
+        obj = hand.object_spec
+        if not {"post_height", "plate_thickness"} <= set(obj.extras):
+            hand.close()
+            raise UserError(f"the marble maze needs the hand to hold {self.object_name!r} "
+                            f"(its plate and post); the hardware config's object is "
+                            f"{obj.name!r}")
+        return hand
 
     # ------------------------------------------------------------------ task hooks
     def _start_task(self) -> None:
@@ -241,7 +249,6 @@ class MarbleMazeEnv(HandTaskEnv):
         ax.legend(fontsize=6, loc="center right")
         fig.tight_layout()
         save_figure(fig, path)
-        plt.close(fig)
 
     def render(self):
         if self.render_mode == "rgb_array" and self.backend == "sim" and self.hand is not None:

@@ -80,8 +80,8 @@ def test_handwriting_is_deterministic_for_a_seed():
 
 def test_handwriting_episode_one_letter_seeded_regression(tmp_path):
     """The VLR baseline writes an 'I' (2 scored waypoints) through `vlr task`; seed 0's
-    error was 0.05 mm when written. The bound is loose: the sim and the filter are
-    deterministic, but the identification is still being improved."""
+    error was 0.05 mm when written, 0.06 mm at 2658a0d (camera tolerance 0.1 mm). The bound
+    leaves room for the identification still being improved, not for missing the letter."""
     from vlr.cli import main
 
     out = tmp_path / "hw"
@@ -93,16 +93,42 @@ def test_handwriting_episode_one_letter_seeded_regression(tmp_path):
     e = result["errors"]
     assert {"position_mm_mean", "position_mm_sd"} <= e.keys()
     assert result["waypoints_scored"] == 2 and not result["grasp_lost"]
-    assert e["position_mm_mean"] < 0.3, e
+    assert e["position_mm_mean"] < 0.15, e
 
 
-def test_task_command_rejects_unknown_tasks_and_options(tmp_path, capsys):
+def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
+    """One line each (exit 2), before the sim opens, and nothing written."""
     from vlr.cli import main
 
-    assert main(["task", "juggling", "--out", str(tmp_path)]) == 2
-    assert "unknown task" in capsys.readouterr().err
-    assert main(["task", "handwriting", "--option", "nonsense", "--out", str(tmp_path)]) == 2
-    assert "KEY=VALUE" in capsys.readouterr().err
+    a_file = tmp_path / "a_file"
+    a_file.write_text("")
+    bad = [(["juggling"], "unknown task"),
+           (["handwriting", "--option", "nonsense"], "KEY=VALUE"),
+           (["handwriting", "--seed", "-1"], "--seed"),
+           (["handwriting", "--identify-iterations", "-1"], "--identify-iterations"),
+           (["handwriting", "--option", "word=#"], "not in the font"),
+           (["handwriting", "--option", "word=123"], "word"),
+           (["handwriting", "--option", "letter_height=-1"], "letter_height"),
+           (["handwriting", "--option", "max_step=0"], "max_step"),
+           (["maze", "--option", "n_runs=0"], "n_runs"),
+           (["handwriting", "--option", "colour=1"], "colour")]
+    for argv, message in bad:
+        assert main(["task", *argv, "--out", str(tmp_path / "out")]) == 2, argv
+        err = capsys.readouterr().err
+        assert message in err and "Traceback" not in err, (argv, err)
+    assert main(["task", "handwriting", "--out", str(a_file / "x")]) == 2
+    assert "--out" in capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
+
+
+def test_maze_on_hardware_names_the_object_it_needs(tmp_path, capsys):
+    """The hardware config grasps the apple: the maze says so before identifying."""
+    from vlr.cli import main
+
+    assert main(["task", "maze", "--backend", "hardware", "--config",
+                 "hardware/example_sim_config.yaml", "--quiet", "--out", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "maze_holder" in err and "'apple'" in err, err
 
 
 def test_marble_maze_passes_the_env_checker_and_renders_the_plate():
@@ -131,7 +157,7 @@ def test_marble_maze_short_episode_rolls_the_marble_along_the_first_run():
                 break
         assert terminated
         m = env.unwrapped.metrics()
-        assert m["errors"]["orientation_deg_mean"] < 1.0, m
+        assert m["errors"]["orientation_deg_mean"] < 0.4, m   # 0.17 deg at 2658a0d
         assert info["truth"]["marble_on_plate"][0] > 0.02   # rolled right, to the run's end
     finally:
         env.close()

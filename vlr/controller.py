@@ -119,6 +119,11 @@ class ControllerConfig:
             raise ValueError(f"method {self.method!r}: use 'transpose' or 'dls'")
         if not (self.max_step > 0 and self.jacobian_eps > 0 and self.jacobian_particles >= 1):
             raise ValueError("max_step, jacobian_eps and jacobian_particles must be positive")
+        # The trust region divides by these; a zero gain or a negative damping is no step.
+        if not (self.max_motion_pos > 0 and self.max_motion_rot > 0 and self.gain > 0
+                and self.damping >= 0 and self.max_steps >= 0):
+            raise ValueError("max_motion_pos, max_motion_rot and gain must be positive, "
+                             "damping and max_steps >= 0")
 
 
 # --------------------------------------------------------------------------- pose errors

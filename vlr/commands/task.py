@@ -1,8 +1,9 @@
-"""`vlr task handwriting|maze|cups`: run the VLR baseline controller on a task environment.
+"""`vlr task handwriting|maze`: run the VLR baseline controller on a task environment.
 
 Writes into --out: `result.json` (the task metrics under `errors`, plus settings and timing)
-and `task.png` (the traced letters over the targets, the marble's path in the maze, the
-final stack), both atomically.
+and `task.png` (the traced letters over the targets, the marble's path in the maze), both
+atomically. Arguments, environment options and the output folder are checked before the
+(minutes-long) run, so that a bad one ends in one line, not a traceback after the run.
 
 The environments live in the `tasks` package, which plugs in through the `vlr.tasks`
 entry-point group (pyproject.toml), as backends do: `vlr` never imports `tasks`, `sim` or
@@ -12,6 +13,7 @@ entry-point group (pyproject.toml), as backends do: `vlr` never imports `tasks`,
 from __future__ import annotations
 
 import argparse
+import os
 import time
 from importlib.metadata import entry_points
 from pathlib import Path
@@ -27,8 +29,8 @@ def _tasks() -> dict[str, object]:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("task", help="run the VLR baseline controller on a manipulation task "
-                       "(handwriting, marble maze, cup stacking)")
-    p.add_argument("name", help="handwriting | maze | cups")
+                       "(handwriting, marble maze)")
+    p.add_argument("name", help="handwriting | maze")
     p.add_argument("--backend", default="sim", help="sim | hardware")
     p.add_argument("--config", help="hardware backend: the hardware YAML file")
     p.add_argument("--seed", type=int, default=0)
@@ -75,18 +77,30 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--backend hardware needs --config FILE")
     if args.particles < 10:
         raise UserError(f"--particles {args.particles} must be >= 10")
+    if args.identify_iterations < 0:
+        raise UserError(f"--identify-iterations {args.identify_iterations} must be >= 0")
+    if args.seed < 0:
+        raise UserError(f"--seed {args.seed} must be >= 0")
+    options = _parse_options(args.option)
     env_id = found[args.name].load()      # importing the tasks package registers the envs
     if env_id not in gym.registry:
         raise UserError(f"task {args.name!r} ({env_id}) is not available in this version")
     kwargs = {"backend": args.backend, "particles": args.particles,
-              "identify_iterations": args.identify_iterations, **_parse_options(args.option)}
+              "identify_iterations": args.identify_iterations, **options}
     if args.config:
         kwargs["hardware_config"] = args.config
     out = Path(args.out or f"runs/task-{args.name}")
-    try:
+    try:   # checks the arguments; the backend opens in reset
         env = gym.make(env_id, **kwargs)
-    except TypeError as exc:
+    except (TypeError, ValueError) as exc:   # an unknown or bad environment argument
         raise UserError(f"--option: {exc}") from None
+    try:   # the run takes minutes: a folder that cannot be written fails now, not after it
+        out.mkdir(parents=True, exist_ok=True)
+        if not os.access(out, os.W_OK):
+            raise PermissionError(f"{str(out)!r} is not writable")
+    except OSError as exc:
+        env.close()
+        raise UserError(f"--out {str(out)!r}: {exc.strerror or exc}") from None
     changes = {}
     if args.method:
         changes["method"] = args.method
@@ -95,7 +109,11 @@ def run(args: argparse.Namespace) -> int:
     t0 = time.perf_counter()
     bar = None
     try:
-        obs, info = env.reset(seed=args.seed)
+        try:
+            obs, info = env.reset(seed=args.seed)
+        except FloatingPointError as exc:
+            raise UserError(f"the identification in reset failed ({exc}); try more "
+                            "--particles") from None
         t_identified = time.perf_counter()
         policy = env.unwrapped.baseline(**changes)   # the policy ships with the env
         if not args.quiet:
@@ -115,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
             bar.close()
         task = env.unwrapped
         result = {"task": args.name, "env": env_id, "backend": args.backend, "seed": args.seed,
-                  "particles": args.particles, "options": _parse_options(args.option),
+                  "particles": args.particles, "options": options,
                   "controller": {"method": policy.config.method,
                                  "rows": policy.config.rows, "alpha": policy.config.alpha,
                                  "secant": policy.config.secant},
@@ -124,8 +142,8 @@ def run(args: argparse.Namespace) -> int:
                   "steps": steps,
                   "timing": {"identify_s": t_identified - t0,
                              "wall_s": time.perf_counter() - t0}}
+        write_json_atomic(out / "result.json", result)   # the numbers first, then the picture
         task.picture(out / "task.png")
-        write_json_atomic(out / "result.json", result)
     finally:
         env.close()
     print(summary_line(result))
