@@ -15,7 +15,7 @@ from typing import Any, NoReturn
 
 from hardware.bus import SDK_BAUD_RATES
 from hardware.control_table import EXTENDED_POSITION_LIMIT, OperatingMode
-from vlr.spec import SpecError, load_hand, load_yaml_mapping
+from vlr.spec import SpecError, load_hand, load_object, load_yaml_mapping
 
 #: `bus.port` value that runs the bus against an in-process emulator (a dry run).
 EMULATOR_PORT = "emulator"
@@ -265,6 +265,10 @@ def load_config(path: str | Path) -> HardwareConfig:
     except SpecError as exc:
         raise HardwareConfigError(f"{path}: hand = {hand_name!r}: {exc}") from None
     object_name = _maybe_relative(top.string("object"), base)
+    try:
+        load_object(object_name)
+    except SpecError as exc:
+        raise HardwareConfigError(f"{path}: object = {object_name!r}: {exc}") from None
 
     bus = _bus(top.section("bus"))
     fingers = _fingers(top.section("fingers"), hand.finger_names)

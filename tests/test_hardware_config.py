@@ -64,6 +64,7 @@ def _edit(section: str, key: str, value):
     (_edit("emulator", "plant", "gazebo"), r"emulator.plant = 'gazebo' must be one of"),
     (_edit("spread", "position", 5000), r"spread.position = 5000 must be in \[0, 4095\]"),
     (_edit("hand", "", "nohand"), r"hand = 'nohand': unknown hand"),
+    (_edit("object", "", "banana"), r"object = 'banana': unknown object"),
     (_edit("motion", "", None), r"motion = None must be a mapping"),
 ])
 def test_bad_values_are_named(tmp_path, data, message):
