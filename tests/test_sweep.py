@@ -1,5 +1,6 @@
 """`vlr sweep`: a sweep file expands to trials, streams one file per trial, resumes without
-repeating finished trials, and rebuilds the same tables from those files."""
+repeating finished trials, and rebuilds the same tables from those files. The tiny sweep
+(`sweep_file`) is tests/conftest.py's."""
 
 import json
 
@@ -9,23 +10,6 @@ from vlr.cli import main
 from vlr.errors import UserError
 from vlr.sweep import Trial, expand, load_sweep, parse_seeds, run_one
 from vlr.trial import TrialSettings
-
-SWEEP = """\
-name: tiny
-seeds: 0-1
-settings: {backend: synthetic, particles: 200, max_iterations: 2}
-cases:
-  - {name: known hand}
-  - {name: stiffness, unknowns: ["stiffness:thumb.distal"],
-     true_stiffness: {thumb.distal: 0.045}}
-"""
-
-
-@pytest.fixture
-def sweep_file(tmp_path):
-    path = tmp_path / "sweep.yaml"
-    path.write_text(SWEEP + f"out: {tmp_path / 'out'}\n")
-    return path
 
 
 def test_sweep_file_expands_to_cases_times_seeds(sweep_file):
@@ -89,3 +73,43 @@ def test_bad_sweep_files_name_the_problem(tmp_path):
         load_sweep(p)
     with pytest.raises(UserError, match="not found"):
         load_sweep(tmp_path / "missing.yaml")
+
+
+@pytest.mark.parametrize("text, match", [
+    ("seeds: [a]", "seeds"), ("seeds: [1.5]", "seeds"), ("seeds: true", "seeds"),
+    ("cases: 3", "cases must be a list"), ("cases: [3]", "cases must be a list"),
+    ("settings: 5", "settings must be a mapping"),
+    ("grid: {object: apple}", "grid must map"), ("grid: {object: []}", "grid must map"),
+    ("grid: {seed: [1, 2]}", "top-level seeds"),
+    ("settings: {particles: many}", "particles 'many' must be an integer"),
+    ("settings: {max_iterations: '3'}", "max_iterations"),
+    ("settings: {sigma_pos_mm: x}", "sigma_pos_mm"),
+    ("settings: {true_stiffness: [1]}", "true_stiffness"),
+    ("settings: {nominal_theta_deg: 3}", "nominal_theta_deg"),
+    ("grid: {object: [apple, no_such_object]}", "no_such_object"),
+    ("settings: {unknowns: [stiffness:thumb.nope]}", "thumb.nope"),
+])
+def test_bad_types_in_a_sweep_file_are_one_user_error(tmp_path, text, match):
+    p = tmp_path / "s.yaml"
+    p.write_text(f"out: {tmp_path / 'out'}\n{text}\n")
+    with pytest.raises(UserError, match=match):
+        expand(load_sweep(p))
+
+
+def test_a_sweep_that_never_starts_leaves_no_files(sweep_file, tmp_path, monkeypatch):
+    import vlr.executors
+
+    def refuse(*a, **k):
+        raise UserError("no workers")
+
+    monkeypatch.setattr(vlr.executors, "run_local", refuse)
+    assert main(["sweep", str(sweep_file), "--quiet"]) == 2
+    assert not (tmp_path / "out").exists()
+
+
+def test_a_record_that_cannot_be_written_leaves_no_file(tmp_path):
+    from vlr.io import write_json_atomic
+
+    with pytest.raises(TypeError):
+        write_json_atomic(tmp_path / "r.json", {"x": object()})
+    assert list(tmp_path.iterdir()) == []

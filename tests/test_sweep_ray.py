@@ -12,16 +12,6 @@ import pytest
 
 from vlr.cli import main
 
-SWEEP = """\
-name: tiny
-seeds: 0-1
-settings: {backend: synthetic, particles: 200, max_iterations: 2}
-cases:
-  - {name: known hand}
-  - {name: stiffness, unknowns: ["stiffness:thumb.distal"],
-     true_stiffness: {thumb.distal: 0.045}}
-"""
-
 # Columns that measure time, not results: they differ from run to run.
 TIMING = {"s_per_iteration", "s/iteration", "wall_s", "elapsed_s"}
 
@@ -33,13 +23,6 @@ def ray_instance():
     ray.init(address="local", num_cpus=2, include_dashboard=False)
     yield ray
     ray.shutdown()
-
-
-@pytest.fixture
-def sweep_file(tmp_path):
-    path = tmp_path / "sweep.yaml"
-    path.write_text(SWEEP)
-    return path
 
 
 def _table(path):

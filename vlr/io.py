@@ -1,14 +1,24 @@
-"""Result files: written to a temporary file and renamed, never left half-written."""
+"""Result files: written to a temporary file and renamed, never left half-written.
+
+`atomic_path(path)` is the one place this is done: JSON (`write_json_atomic`), text
+(`write_text_atomic`), and anything a library writes to a path (`np.savez`, `fig.savefig`)
+go through it. Files end up readable by all (0644): results and pictures are for sharing,
+and mkstemp's 0600 would hide them on a shared filesystem.
+"""
 
 from __future__ import annotations
 
 import json
 import os
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+__all__ = ["atomic_path", "write_text_atomic", "write_json_atomic"]
 
 
 def _default(o: Any) -> Any:
@@ -19,17 +29,31 @@ def _default(o: Any) -> Any:
     raise TypeError(f"cannot write {type(o).__name__} to JSON")
 
 
-def write_json_atomic(path: str | Path, data: Any) -> None:
-    """Write `data` as JSON to `path` atomically (temp file in the same folder, then rename)."""
+@contextmanager
+def atomic_path(path: str | Path) -> Iterator[Path]:
+    """A temporary path next to `path` (same suffix, so writers that go by it still work)
+    to write to; renamed onto `path` when the block succeeds, removed when it does not."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
+    os.close(fd)
     try:
-        with os.fdopen(fd, "w") as f:
-            json.dump(data, f, indent=2, default=_default)
-            f.write("\n")
+        yield Path(tmp)
+        os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     except BaseException:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def write_text_atomic(path: str | Path, text: str) -> Path:
+    """Write `text` (UTF-8) to `path` atomically; return the path."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)
+
+
+def write_json_atomic(path: str | Path, data: Any) -> None:
+    """Write `data` as JSON to `path` atomically (temp file in the same folder, then rename)."""
+    write_text_atomic(path, json.dumps(data, indent=2, default=_default) + "\n")

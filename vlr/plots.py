@@ -9,13 +9,11 @@ plots of errors over many trials (for sweeps).
   truth is the filter converging (METHOD.md 3).
 * `boxplots(rows, path)` draws the errors of many `result.json`s grouped by object and hand.
 
-Pictures are written atomically (temp file in the folder, then rename).
+Pictures are written atomically (`vlr.io.atomic_path`).
 """
 
 from __future__ import annotations
 
-import os
-import tempfile
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -60,17 +58,11 @@ def pick_iterations(available: Iterable[int], n: int = 4) -> list[int]:
 def _save(fig: Any, path: Path, dpi: int = 110) -> Path:
     import matplotlib.pyplot as plt
 
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.stem}.", suffix=path.suffix, dir=path.parent)
-    os.close(fd)
+    from vlr.io import atomic_path
+
     try:
-        fig.savefig(tmp, dpi=dpi)
-        os.chmod(tmp, 0o644)  # mkstemp makes 0600; a picture is for sharing
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+        with atomic_path(path) as tmp:
+            fig.savefig(tmp, dpi=dpi)
     finally:
         plt.close(fig)
     return path

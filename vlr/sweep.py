@@ -28,7 +28,6 @@ import io
 import itertools
 import json
 import math
-import os
 import traceback
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -39,7 +38,7 @@ import numpy as np
 
 from vlr.errors import UserError
 from vlr.executors import run_local, run_ray
-from vlr.io import write_json_atomic
+from vlr.io import write_json_atomic, write_text_atomic
 from vlr.trial import TrialSettings
 
 __all__ = ["Trial", "SweepSpec", "load_sweep", "parse_seeds", "expand", "run_one",
@@ -81,25 +80,36 @@ class SweepSpec:
 
 def parse_seeds(value: Any) -> tuple[int, ...]:
     """Seeds from a list, an int, or a string like "0-4" or "0,3,7"."""
+    usage = f"seeds {value!r}: use e.g. 0-4 or 0,1,2"
+    if isinstance(value, bool):
+        raise UserError(usage)
     if isinstance(value, int):
-        return (value,)
-    if isinstance(value, list | tuple):
-        out = value
-    else:
+        out: list[Any] = [value]
+    elif isinstance(value, list | tuple):
+        out = list(value)
+    elif isinstance(value, str):
         out = []
-        for part in str(value).split(","):
+        for part in value.split(","):
             part = part.strip()
             lo, sep, hi = part.partition("-")
             try:
                 out += list(range(int(lo), int(hi) + 1)) if sep else [int(part)]
             except ValueError:
-                raise UserError(f"seeds {value!r}: use e.g. 0-4 or 0,1,2") from None
+                raise UserError(usage) from None
+    else:
+        raise UserError(usage)
+    # int("3") is fine; 1.5 or true is not a seed (int() would quietly make them 1).
+    if not all((isinstance(s, int) and not isinstance(s, bool)) or isinstance(s, str)
+               for s in out):
+        raise UserError(usage)
     try:
         seeds = tuple(int(s) for s in out)
-    except (TypeError, ValueError):
-        raise UserError(f"seeds {value!r}: use e.g. 0-4 or 0,1,2") from None
+    except ValueError:
+        raise UserError(usage) from None
     if not seeds:
         raise UserError("a sweep needs at least one seed")
+    if min(seeds) < 0:
+        raise UserError(f"{usage} (seeds are >= 0)")
     return seeds
 
 
@@ -120,16 +130,29 @@ def load_sweep(path: str | Path, out: str | Path | None = None) -> SweepSpec:
     if bad:
         raise UserError(f"sweep file {str(path)!r}: unknown key(s) {bad}; known: name, out, "
                         "seeds, settings, cases, grid")
+    where = f"sweep file {str(path)!r}"
+    settings = raw.get("settings") or {}
+    if not isinstance(settings, dict):
+        raise UserError(f"{where}: settings must be a mapping, e.g. {{backend: synthetic}}")
+    cases = raw.get("cases") or [{}]
+    if not isinstance(cases, list) or not all(isinstance(c, dict) for c in cases):
+        raise UserError(f"{where}: cases must be a list of mappings, e.g. "
+                        "[{name: known hand}, {name: stiffness, unknowns: [...]}]")
     grid = raw.get("grid") or {}
-    if not isinstance(grid, dict) or not all(isinstance(v, list) for v in grid.values()):
-        raise UserError(f"sweep file {str(path)!r}: grid must map settings to lists")
+    if not isinstance(grid, dict) or not all(isinstance(v, list) and v
+                                             for v in grid.values()):
+        raise UserError(f"{where}: grid must map settings to non-empty lists, e.g. "
+                        "{object: [apple, wine_glass]}")
+    if any("seed" in d for d in (settings, grid, *cases)):
+        raise UserError(f"{where}: give seeds with the top-level seeds:, not as a setting")
     target = out or raw.get("out")
     if not target:
-        raise UserError(f"sweep file {str(path)!r}: give an output folder (out: or --out)")
+        raise UserError(f"{where}: give an output folder (out: or --out)")
+    if not isinstance(target, str | Path):
+        raise UserError(f"{where}: out {target!r} must be a folder path")
     return SweepSpec(name=str(raw.get("name", path.stem)), out=Path(target),
-                     seeds=parse_seeds(raw.get("seeds", 0)),
-                     settings=dict(raw.get("settings") or {}),
-                     cases=tuple(raw.get("cases") or ({},)), grid=grid)
+                     seeds=parse_seeds(raw.get("seeds", 0)), settings=dict(settings),
+                     cases=tuple(cases), grid=grid)
 
 
 def expand(spec: SweepSpec) -> list[Trial]:
@@ -147,7 +170,31 @@ def expand(spec: SweepSpec) -> list[Trial]:
     ids = [t.id for t in trials]
     if len(set(ids)) != len(ids):
         raise UserError("the sweep defines the same trial twice; check cases and grid")
+    _check_names(trials)
     return trials
+
+
+def _check_names(trials: list[Trial]) -> None:
+    """A misspelt object, hand or unknown is one error now, not a failed trial per seed."""
+    from vlr.kinematics import HandModel
+    from vlr.spec import SpecError, load_hand, load_object
+    from vlr.trial import check_unknowns
+
+    seen: set = set()
+    for t in trials:
+        s = t.settings
+        key = (s.object, s.hand, s.true_hand, s.unknowns)
+        if key in seen:
+            continue
+        seen.add(key)
+        try:
+            load_object(s.object)
+            model = HandModel.from_spec(load_hand(s.hand))
+            if s.true_hand:
+                load_hand(s.true_hand)
+        except (SpecError, FileNotFoundError) as exc:
+            raise UserError(f"case {t.case!r}: {exc}") from None
+        check_unknowns(s, model)
 
 
 def trial_path(out: Path, trial: Trial) -> Path:
@@ -301,15 +348,6 @@ def markdown_table(summary: list[dict[str, str]]) -> str:
     return "\n".join(lines) + "\n"
 
 
-def _write_text_atomic(path: Path, text: str) -> None:
-    import tempfile
-
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-    with os.fdopen(fd, "w") as f:
-        f.write(text)
-    os.replace(tmp, path)
-
-
 def write_tables(out: Path, records: list[dict[str, Any]], title: str = "sweep",
                  note: str = "") -> dict[str, Path]:
     """table.csv (per trial), summary.csv and summary.md (per case), written atomically."""
@@ -318,14 +356,14 @@ def write_tables(out: Path, records: list[dict[str, Any]], title: str = "sweep",
     summary = summarize_rows(rows)
     paths = {"table": out / "table.csv", "summary_csv": out / "summary.csv",
              "summary_md": out / "summary.md"}
-    _write_text_atomic(paths["table"], _csv_text(rows))
-    _write_text_atomic(paths["summary_csv"], _csv_text(summary))
+    write_text_atomic(paths["table"], _csv_text(rows))
+    write_text_atomic(paths["summary_csv"], _csv_text(summary))
     failed = [r for r in rows if r.get("status") != "ok"]
     md = f"# {title}\n\n{note}{markdown_table(summary)}"
     if failed:
         md += "\nFailed trials:\n\n" + "".join(
             f"- {r['case']} {r['object']} seed {r['seed']}: {r.get('error')}\n" for r in failed)
-    _write_text_atomic(paths["summary_md"], md)
+    write_text_atomic(paths["summary_md"], md)
     ok = [r for r in records if r.get("status") == "ok" and r["result"].get("errors")]
     if ok:
         from vlr.plots import boxplots

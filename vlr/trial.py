@@ -11,6 +11,7 @@ result and rebuild the table from files alone.
 
 from __future__ import annotations
 
+import numbers
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field, fields
@@ -74,6 +75,9 @@ class TrialSettings:
     config: str | None = None
 
     def __post_init__(self) -> None:
+        self._check_types()
+        if self.seed < 0:
+            raise UserError(f"seed {self.seed} must be >= 0")
         if self.particles < 10:
             raise UserError(f"particles {self.particles} must be >= 10")
         if self.max_iterations < 1:
@@ -95,11 +99,50 @@ class TrialSettings:
             object.__setattr__(self, "nominal_theta_deg",
                                tuple(float(v) for v in self.nominal_theta_deg))
 
+    def _check_types(self) -> None:
+        """A setting of the wrong type (a sweep file's `particles: many`) is one UserError
+        naming it, before any comparison or world can trip over it."""
+        def bad(name: str, want: str) -> UserError:
+            return UserError(f"{name} {getattr(self, name)!r} must be {want}")
+
+        def is_int(v: Any) -> bool:
+            return isinstance(v, numbers.Integral) and not isinstance(v, bool)
+
+        def is_real(v: Any) -> bool:
+            return isinstance(v, numbers.Real) and not isinstance(v, bool)
+
+        for name in ("backend", "object", "hand"):
+            if not isinstance(getattr(self, name), str) or not getattr(self, name):
+                raise bad(name, "a name")
+        for name in ("true_hand", "config"):
+            if getattr(self, name) is not None and not isinstance(getattr(self, name), str):
+                raise bad(name, "a name or path")
+        for name in ("particles", "seed", "max_iterations", "min_iterations"):
+            if not is_int(getattr(self, name)):
+                raise bad(name, "an integer")
+        for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg"):
+            v = getattr(self, name)
+            if not (is_real(v) or (v is None and name != "prior_spread_deg")):
+                raise bad(name, "a number")
+        if isinstance(self.unknowns, str):  # one unknown, not a list of its letters
+            object.__setattr__(self, "unknowns", (self.unknowns,))
+        if (not isinstance(self.unknowns, list | tuple)
+                or not all(isinstance(u, str) for u in self.unknowns)):
+            raise bad("unknowns", "a list like [stiffness:thumb.distal]")
+        if (not isinstance(self.true_stiffness, dict)
+                or not all(isinstance(k, str) and is_real(v)
+                           for k, v in self.true_stiffness.items())):
+            raise bad("true_stiffness", "a mapping like {thumb.distal: 0.045}")
+        if self.nominal_theta_deg is not None and (
+                not isinstance(self.nominal_theta_deg, list | tuple)
+                or not all(is_real(v) for v in self.nominal_theta_deg)):
+            raise bad("nominal_theta_deg", "a list of angles [deg], one per joint")
+
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrialSettings:
         """Settings from a dict (a sweep file's entry); unknown keys are named in the error."""
         known = {f.name for f in fields(cls)}
-        bad = sorted(set(d) - known)
+        bad = sorted(str(k) for k in set(d) - known)
         if bad:
             raise UserError(f"unknown trial setting(s) {bad}; known: {sorted(known)}")
         return cls(**d)

@@ -30,7 +30,6 @@ from __future__ import annotations
 import atexit
 import contextlib
 import io
-import os
 import shutil
 import subprocess
 import tempfile
@@ -376,20 +375,9 @@ class FilterView:
 
     def save_html(self, path: str | Path) -> Path:
         """Write `static_html()` to `path` atomically (temp file in the folder, then rename)."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
-        html = self.static_html()
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", dir=path.parent)
-        try:
-            with os.fdopen(fd, "w", encoding="utf-8") as f:
-                f.write(html)
-            os.chmod(tmp, 0o644)  # a page to share: mkstemp's 0600 would hide it
-            os.replace(tmp, path)
-        except BaseException:
-            if os.path.exists(tmp):
-                os.unlink(tmp)
-            raise
-        return path
+        from vlr.io import write_text_atomic
+
+        return write_text_atomic(path, self.static_html())
 
 
 # --------------------------------------------------------------------------- headless screenshots

@@ -226,10 +226,7 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
 
 def write_outputs(out: Path, result, summary: dict, model, truths: list | None = None) -> None:
     """result.json, history.npz and convergence.png, each written atomically."""
-    import os
-    import tempfile
-
-    from vlr.io import write_json_atomic
+    from vlr.io import atomic_path, write_json_atomic
 
     out.mkdir(parents=True, exist_ok=True)
     n, k = model.n_fingers, model.n_joints
@@ -246,18 +243,13 @@ def write_outputs(out: Path, result, summary: dict, model, truths: list | None =
         hist["theta_error_deg"] = np.array([s.theta_error_deg for s in result.scores])
     if truths:
         hist["truth_theta"] = np.array([t.theta.ravel() for t in truths])
-    fd, tmp = tempfile.mkstemp(prefix=".history.", suffix=".npz", dir=out)
-    os.close(fd)
-    np.savez_compressed(tmp, **hist)
-    os.replace(tmp, out / "history.npz")
+    with atomic_path(out / "history.npz") as tmp:
+        np.savez_compressed(tmp, **hist)
     _plot(out / "convergence.png", hist, model, n, k)
     write_json_atomic(out / "result.json", summary)
 
 
 def _plot(path: Path, hist: dict, model, n: int, k: int) -> None:
-    import os
-    import tempfile
-
     import matplotlib
 
     matplotlib.use("Agg")
@@ -278,11 +270,9 @@ def _plot(path: Path, hist: dict, model, n: int, k: int) -> None:
         ax.set_ylabel("angle [deg]")
     axes[0, 0].legend(loc="best", fontsize=8)
     fig.tight_layout()
-    fd, tmp = tempfile.mkstemp(prefix=".convergence.", suffix=".png", dir=path.parent)
-    os.close(fd)
-    fig.savefig(tmp, dpi=110)
-    plt.close(fig)
-    os.replace(tmp, path)
+    from vlr.plots import _save
+
+    _save(fig, path)  # atomically (vlr.io.atomic_path), and the figure closed
 
 
 def format_table(result, summary: dict, model) -> str:

@@ -117,17 +117,22 @@ def run(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.update(1)
 
+    finished = False
     try:
         if args.executor == "ray":
             run_ray(todo, out, args.workers, on_done, keep_files=args.keep_files,
                     address=args.address, working_dir=args.working_dir)
         else:
             run_local(todo, out, args.workers, on_done, keep_files=args.keep_files)
+        finished = True
     finally:
         if bar is not None:
             bar.close()
         records = collect(out, trials)
-        paths = write_tables(out, records, spec.name)
+        # An interrupted sweep keeps the table of what finished; one that never started
+        # (a bad --address) leaves no empty tables behind.
+        if finished or records:
+            paths = write_tables(out, records, spec.name)
     print(paths["summary_md"].read_text())
     print(f"{len(todo)} trial(s) in {time.perf_counter() - t0:.0f} s, {failed} failed; wrote "
           f"{paths['table']}, {paths['summary_csv']}, {paths['summary_md']}")
