@@ -34,8 +34,6 @@ the two. `save_calibration` always writes the matrix. A rotation must be orthono
 from __future__ import annotations
 
 import math
-import os
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -44,6 +42,7 @@ import numpy as np
 import yaml
 from scipy.spatial.transform import Rotation
 
+from vlr.io import write_text_atomic
 from vlr.spec import SpecError, load_yaml_mapping
 
 __all__ = [
@@ -303,13 +302,4 @@ def save_calibration(cal: CameraCalibration, path: str | Path) -> None:
     path = Path(path)
     text = "# vlr camera calibration (format: vlr/camera.py)\n" + yaml.safe_dump(
         calibration_to_dict(cal), sort_keys=False, default_flow_style=None)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_text_atomic(path, text)

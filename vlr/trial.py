@@ -89,9 +89,10 @@ class TrialSettings:
             v = getattr(self, name)
             if v is not None and not v > 0:
                 raise UserError(f"{name} {v} must be > 0")
-        if self.true_hand and self.backend != "synthetic":
-            raise UserError("true_hand is for the synthetic world only: the sim and the real "
-                            "hand are what they are")
+        for name in ("true_hand", "true_stiffness"):
+            if getattr(self, name) and self.backend != "synthetic":
+                raise UserError(f"{name} is for the synthetic world only: the sim and the "
+                                "real hand are what they are")
         if not self.prior_spread_deg > 0:
             raise UserError(f"prior_spread_deg {self.prior_spread_deg} must be > 0")
         object.__setattr__(self, "unknowns", tuple(self.unknowns))
@@ -235,6 +236,14 @@ def open_world(settings: TrialSettings) -> World:
     hand = open_backend(settings.backend, object=settings.object, hand=settings.hand,
                         seed=settings.seed, **options)
     spec = hand.object_spec
+    if (hand.spec.name, spec.name) != (hand_spec.name, obj_spec.name):
+        # The backend decides what is there (the hardware config names its object and
+        # hand): the filter's model must be that, not the command line's defaults.
+        hand_spec = hand.spec
+        model = HandModel.from_spec(hand_spec)
+        check_unknowns(settings, model)
+        obj = ObjectParams.from_spec(spec)
+        nominal = nominal_grasp(model, obj, guess)
 
     def observer():
         frame = hand.grab_frame()
