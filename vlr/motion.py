@@ -14,6 +14,9 @@ Formulation (METHOD.md 8.1-8.2; the choice is ours):
   tendon 1/2 k_t max(0, u - s(theta))^2 with s = sum r_k (theta_k - lo_k) (Eq. 7 with
   compliance); joint limits as stiff one-sided penalties; gravity potential of the object and
   of the finger links under a configurable gravity vector in the palm frame.
+* Rolling (`vlr.surface`, term "rolling"): after each solve, every contact moves to where
+  the pad sphere now touches the object's local surface (plane, sphere or cylinder of known
+  curvature); within a solve the contact is pinned, which is rolling to first order.
 * Solver: per-particle Levenberg-Marquardt on the exact Hessian (arrow structure, Schur
   complement), warm-started from the particle's previous configuration, with a step limit.
   A particle whose solve fails (non-finite, no convergence, or a jump larger than an action
@@ -32,6 +35,7 @@ import numpy as np
 from vlr import _energy_kernels as kern
 from vlr.kinematics import HandModel, contact_in_distal, contact_points, plane_rotation
 from vlr.spec import ObjectSpec
+from vlr.surface import LocalSurface, roll_contacts, surface_normals
 
 __all__ = [
     "TERMS",
@@ -54,6 +58,9 @@ TERMS: dict[str, int] = {
     "object_gravity": kern.OBJECT_GRAVITY,
     "contacts": kern.CONTACTS,
 }
+
+# Terms applied between solves rather than inside the energy (no kernel code).
+POST_SOLVE_TERMS = ("rolling",)
 
 STATUS = {kern.OK: "ok", kern.NONFINITE: "non-finite", kern.NO_CONVERGENCE: "no convergence",
           kern.JUMP: "jump", kern.INACTIVE: "inactive"}
@@ -79,10 +86,14 @@ class MotionConfig:
         jump_theta: a solve that moves any joint more than this is another branch [rad].
         jump_pos: ... or moves the POM more than this [m].
         mu0: initial Levenberg-Marquardt damping (relative to the Hessian diagonal).
+        rolling_substeps: with "rolling" in `terms`, a command change given its start
+            (`MotionModel.solve(..., u_from=)`) is split into this many solves, the contacts
+            rolled after each: the pinned contact within a solve is exact only to first order.
     """
 
     terms: tuple[str, ...] = ("springs", "tendon", "limits", "link_gravity",
                               "object_gravity", "contacts")
+    rolling_substeps: int = 1
     contact_stiffness: float = 1e6
     limit_stiffness: float = 100.0
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
@@ -96,14 +107,26 @@ class MotionConfig:
     mu0: float = 1e-6
 
     def __post_init__(self) -> None:
-        unknown = set(self.terms) - set(TERMS)
+        known = set(TERMS) | set(POST_SOLVE_TERMS)
+        unknown = set(self.terms) - known
         if unknown:
-            raise ValueError(f"unknown energy terms {sorted(unknown)}; known: {sorted(TERMS)}")
+            raise ValueError(f"unknown energy terms {sorted(unknown)}; known: {sorted(known)}")
+        if "rolling" in self.terms and "contacts" not in self.terms:
+            raise ValueError("the 'rolling' term moves the contacts of the 'contacts' term: "
+                             "it needs 'contacts' too")
+        if not (isinstance(self.rolling_substeps, int) and self.rolling_substeps >= 1):
+            raise ValueError(f"rolling_substeps {self.rolling_substeps!r} must be an "
+                             "integer >= 1")
+
+    @property
+    def rolling(self) -> bool:
+        return "rolling" in self.terms
 
     def flags(self) -> np.ndarray:
         out = np.zeros(kern.N_TERMS, dtype=np.int64)
         for t in self.terms:
-            out[TERMS[t]] = 1
+            if t in TERMS:
+                out[TERMS[t]] = 1
         return out
 
     def params(self) -> np.ndarray:
@@ -122,14 +145,17 @@ class MotionConfig:
 
 @dataclass(frozen=True)
 class ObjectParams:
-    """What the motion model needs of the object: mass [kg] and centre of mass in O [m]."""
+    """What the motion model needs of the object: mass [kg], centre of mass in O [m] and the
+    local surface the fingertips roll on (`vlr.surface`)."""
 
     mass: float
     com: tuple[float, float, float]
+    surface: LocalSurface = LocalSurface()
 
     @classmethod
     def from_spec(cls, spec: ObjectSpec) -> ObjectParams:
-        return cls(mass=float(spec.mass), com=tuple(float(c) for c in spec.com))
+        return cls(mass=float(spec.mass), com=tuple(float(c) for c in spec.com),
+                   surface=LocalSurface.from_spec(spec))
 
 
 @dataclass
@@ -237,32 +263,60 @@ class MotionModel:
         self._flags = self.config.flags()
         self._prm = self.config.params()
 
-    def solve(self, state: ParticleState, u: np.ndarray,
-              config: MotionConfig | None = None) -> tuple[np.ndarray, np.ndarray]:
+    def solve(self, state: ParticleState, u: np.ndarray, config: MotionConfig | None = None,
+              u_from: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Move every valid particle to its equilibrium at tendon commands `u` (Eq. 9).
 
         Warm-starts from each particle's current configuration and updates theta, pos, rot
-        in place; particles whose solve fails are marked invalid (state.valid = False).
+        in place (and, with rolling, the contacts: normals and anchors); particles whose
+        solve fails are marked invalid (state.valid = False).
 
         Args:
             state: particles; arrays must be C-contiguous float64.
             u: (N,) tendon commands [m].
             config: optional override (e.g. looser jump limits for the initial projection).
+            u_from: (N,) the commands the particles are at; with rolling and
+                `rolling_substeps` > 1, the change is made in that many rolled solves.
         Returns:
-            status (P,) int8 codes (`STATUS`), iterations (P,) int32.
+            status (P,) int8 codes (`STATUS`), iterations (P,) int32 (summed over substeps).
         """
         cfg = config or self.config
         prm = cfg.params() if config is not None else self._prm
         flags = cfg.flags() if config is not None else self._flags
         u = np.ascontiguousarray(u, dtype=float).reshape(self.model.n_fingers)
+        steps = cfg.rolling_substeps if (cfg.rolling and u_from is not None) else 1
+        targets = [u] if steps == 1 else [
+            np.ascontiguousarray(np.asarray(u_from, dtype=float) + (u - u_from) * (j / steps))
+            for j in range(1, steps + 1)]
         status = np.empty(state.n, dtype=np.int8)
-        iters = np.empty(state.n, dtype=np.int32)
-        kern.solve_batch(state.theta, state.segments, state.normals, state.anchors,
-                         state.pos, state.rot, state.stiffness, state.tendon, u,
-                         *self._shared, flags, prm, int(cfg.max_iter), state.valid,
-                         status, iters)
-        state.valid &= status == kern.OK
+        iters = np.zeros(state.n, dtype=np.int32)
+        it = np.empty(state.n, dtype=np.int32)
+        for target in targets:
+            before = surface_normals(self.model, state.theta, state.normals, state.rot) \
+                if cfg.rolling else None
+            kern.solve_batch(state.theta, state.segments, state.normals, state.anchors,
+                             state.pos, state.rot, state.stiffness, state.tendon, target,
+                             *self._shared, flags, prm, int(cfg.max_iter), state.valid,
+                             status, it)
+            iters += it
+            state.valid &= status == kern.OK
+            if cfg.rolling:
+                self.roll(state, before)
         return status, iters
+
+    def roll(self, state: ParticleState, normals_before: np.ndarray) -> None:
+        """Move the valid particles' contacts to where their pads now touch the object
+        (`vlr.surface.roll_contacts`)."""
+        ok = state.valid
+        if not ok.any():
+            return
+        n, a = roll_contacts(self.model, self.obj.surface, state.theta[ok], state.normals[ok],
+                             state.anchors[ok], state.pos[ok], state.rot[ok],
+                             state.segments[ok], normals_before[ok])
+        if ok.all():
+            state.normals, state.anchors = n, a
+        else:
+            state.normals[ok], state.anchors[ok] = n, a
 
     def evaluate(self, state: ParticleState, q: int,
                  u: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:

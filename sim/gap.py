@@ -1,0 +1,312 @@
+"""`vlr gap`: the model-world gap, measured from the simulator's true state (METHOD.md 8.1,
+issue 5).
+
+The filter can only be as right as its motion model (Eq. 4, 9). This diagnostic starts the
+model at the simulator's TRUE configuration (joint angles, contact points, object pose) and
+the TRUE hand parameters, so that what remains is the model's own error:
+
+* per action: the model's equilibrium at the command before the action and at the command
+  after it give its predicted POM motion; its error against the simulator's motion, over the
+  size of that motion, is the per-action gap ratio (position and orientation);
+* static: the model's equilibrium at the current command against the simulator's
+  configuration (joint angles, POM pose);
+* open-loop drift: all actions predicted in sequence from the first true state, never
+  refreshed; the tag's error at the end over the total true motion (`drift_ratio`).
+
+Each model term is switched on in turn (`LADDER`), so each one's share is a measured figure.
+This is a sim-only tool (it reads ground truth); the estimator never runs it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from vlr.errors import UserError
+from vlr.explore import ExplorationRange, random_action
+from vlr.kinematics import HandModel
+from vlr.motion import MotionConfig, MotionModel, ObjectParams, ParticleState
+
+__all__ = ["LADDER", "GapSettings", "record_actions", "measure_gap", "gap_report", "register"]
+
+_BASE = ("springs", "tendon", "limits", "contacts")
+# Model terms switched on in turn; the last row is the full model.
+LADDER: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("fixed contacts, no weights", _BASE),
+    ("+ link weights", _BASE + ("link_gravity",)),
+    ("+ object weight", _BASE + ("link_gravity", "object_gravity")),
+    ("+ rolling", _BASE + ("link_gravity", "object_gravity", "rolling")),
+)
+OBJECTS = ("apple", "wine_glass", "toy_block", "flat_screwdriver", "gelatin_box")
+
+
+@dataclass(frozen=True)
+class GapSettings:
+    """One gap measurement.
+
+    Attributes:
+        object, hand: spec names or files.
+        seed: seeds the random actions (the same actions as `vlr identify --seed`).
+        actions: random actions to make.
+        drift_actions: actions predicted open loop for the drift (the first ones).
+        action_range: |tendon change| range [m]; band: commands stay this close to the grasp.
+        rolling_substeps: solves per action with rolling (`MotionConfig.rolling_substeps`).
+    """
+
+    object: str = "apple"
+    hand: str = "modelo"
+    seed: int = 0
+    actions: int = 30
+    drift_actions: int = 15
+    action_range: tuple[float, float] = (0.2e-3, 0.4e-3)
+    band: float = 0.4e-3
+    rolling_substeps: int = 1
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.actions, int) or self.actions < 1:
+            raise UserError(f"actions {self.actions!r} must be an integer >= 1")
+        if not isinstance(self.drift_actions, int) or self.drift_actions < 1:
+            raise UserError(f"drift actions {self.drift_actions!r} must be an integer >= 1")
+        if not isinstance(self.rolling_substeps, int) or self.rolling_substeps < 1:
+            raise UserError(f"rolling substeps {self.rolling_substeps!r} must be an integer "
+                            ">= 1")
+        lo, hi = self.action_range
+        if not (0 < lo <= hi <= 2e-3):
+            raise UserError(f"action range ({lo}, {hi}) m must satisfy 0 < low <= high <= "
+                            "0.002 (the sim refuses larger moves)")
+
+
+@dataclass(frozen=True)
+class Recording:
+    """What the simulator did: commands u_0..u_n [m] and the true state after each
+    (`vlr.synthetic.Truth`, from `SimHand.scoring_truth`)."""
+
+    hand_spec: object
+    object_spec: object
+    commands: list[np.ndarray]
+    truths: list
+    dropped_at: int | None
+
+
+def record_actions(settings: GapSettings) -> Recording:
+    """Grasp in the simulator and make the random actions, recording the truth after each.
+
+    Stops early if the fingertip grasp is lost (`dropped_at`: the action that lost it)."""
+    from sim.backend import SimHand
+
+    with SimHand(object=settings.object, hand=settings.hand, seed=settings.seed) as hand:
+        commands = [hand.grasp().commands]
+        truths = [hand.scoring_truth()]
+        rng = np.random.default_rng(settings.seed + 1)  # vlr identify's action stream
+        explore = ExplorationRange(settings.action_range[0], settings.action_range[1],
+                                   max(settings.band, settings.action_range[1]))
+        center = commands[0].copy()
+        dropped = None
+        for k in range(1, settings.actions + 1):
+            report = hand.apply(random_action(rng, commands[-1], center, explore))
+            t = hand.scoring_truth()
+            if not report.grasp_held or not np.isfinite(t.normals).all():
+                dropped = k
+                break
+            commands.append(report.commands)
+            truths.append(t)
+        return Recording(hand.true_spec, hand.object_spec, commands, truths, dropped)
+
+
+def _state(model: HandModel, truth) -> ParticleState:
+    """One particle at the true configuration (contacts on the pad spheres, the anchors
+    from the true contacts and POM pose)."""
+    st = ParticleState.nominal(model, 1, truth.theta, truth.normals, truth.position,
+                               truth.rotation)
+    st.segments[0] = truth.segments
+    st.stiffness[0] = truth.stiffness
+    st.tendon[0] = truth.tendon
+    st.anchor_to_pose(model)
+    return st
+
+
+def _angle_deg(r: np.ndarray) -> float:
+    c = (np.trace(r) - 1.0) / 2.0
+    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
+
+
+def _pose(st: ParticleState) -> tuple[np.ndarray, np.ndarray]:
+    return st.pos[0].copy(), st.rot[0].copy()
+
+
+def _motion_error(p0, r0, p1, r1, t0, t1) -> tuple[float, float, float, float]:
+    """Predicted motion (p0, r0) -> (p1, r1) against the true one t0 -> t1: position error
+    [m], orientation error [deg], true position motion [m], true rotation [deg]."""
+    dp_pred, dp_true = p1 - p0, t1.position - t0.position
+    dr_pred, dr_true = r1 @ r0.T, t1.rotation @ t0.rotation.T
+    return (float(np.linalg.norm(dp_pred - dp_true)), _angle_deg(dr_pred @ dr_true.T),
+            float(np.linalg.norm(dp_true)), _angle_deg(dr_true))
+
+
+def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings) -> dict:
+    """Per-action, static and drift gap of the motion model with `terms` (module docstring)."""
+    model = HandModel.from_spec(rec.hand_spec)
+    obj = ObjectParams.from_spec(rec.object_spec)
+    cfg = MotionConfig(terms=terms, rolling_substeps=settings.rolling_substeps)
+    motion = MotionModel(model, obj, cfg)
+    # The static settle may travel further than an action may (the model's own equilibrium).
+    settle = replace(cfg, jump_theta=1.0, jump_pos=0.05, max_iter=200)
+    rows, static = [], []
+    for k in range(len(rec.commands) - 1):
+        t0, t1 = rec.truths[k], rec.truths[k + 1]
+        st = _state(model, t0)
+        status, _ = motion.solve(st, rec.commands[k], settle)
+        p0, r0 = _pose(st)
+        static.append((float(np.linalg.norm(p0 - t0.position)),
+                       _angle_deg(r0 @ t0.rotation.T),
+                       float(np.degrees(np.abs(st.theta[0] - t0.theta)).mean())))
+        motion.solve(st, rec.commands[k + 1], u_from=rec.commands[k])
+        ok = bool(st.valid[0])
+        p1, r1 = _pose(st)
+        e_p, e_r, m_p, m_r = _motion_error(p0, r0, p1, r1, t0, t1)
+        rows.append({"action": k + 1, "ok": ok, "error_position_mm": e_p * 1e3,
+                     "error_orientation_deg": e_r, "motion_position_mm": m_p * 1e3,
+                     "motion_orientation_deg": m_r,
+                     "ratio_position": e_p / m_p if m_p > 0 else math.nan,
+                     "ratio_orientation": e_r / m_r if m_r > 0 else math.nan})
+    ok_rows = [r for r in rows if r["ok"]]
+
+    def stat(key: str, fn) -> float:
+        v = [r[key] for r in ok_rows if np.isfinite(r[key])]
+        return float(fn(v)) if v else math.nan
+
+    drift = _drift(motion, settle, model, rec, settings.drift_actions)
+    s = np.array(static) if static else np.full((1, 3), math.nan)
+    return {
+        "terms": list(terms),
+        "actions": len(rows),
+        "failed_solves": len(rows) - len(ok_rows),
+        "ratio_position_mean": stat("ratio_position", np.mean),
+        "ratio_position_median": stat("ratio_position", np.median),
+        "ratio_orientation_mean": stat("ratio_orientation", np.mean),
+        "ratio_orientation_median": stat("ratio_orientation", np.median),
+        "error_position_mm_mean": stat("error_position_mm", np.mean),
+        "error_orientation_deg_mean": stat("error_orientation_deg", np.mean),
+        **drift,
+        "static": {"position_mm_mean": float(s[:, 0].mean() * 1e3),
+                   "orientation_deg_mean": float(s[:, 1].mean()),
+                   "joint_deg_mean": float(s[:, 2].mean())},
+        "per_action": rows,
+    }
+
+
+def _drift(motion: MotionModel, settle: MotionConfig, model: HandModel, rec: Recording,
+           n: int) -> dict:
+    """Open-loop prediction of the first `n` actions from the first true state."""
+    n = min(n, len(rec.commands) - 1)
+    st = _state(model, rec.truths[0])
+    motion.solve(st, rec.commands[0], settle)
+    p0, r0 = _pose(st)
+    total_p = total_r = 0.0
+    for k in range(1, n + 1):
+        motion.solve(st, rec.commands[k], u_from=rec.commands[k - 1])
+        a, b = rec.truths[k - 1], rec.truths[k]
+        total_p += float(np.linalg.norm(b.position - a.position))
+        total_r += _angle_deg(b.rotation @ a.rotation.T)
+    if n == 0 or not st.valid[0]:
+        return {"drift_actions": n, "drift_ratio": math.nan,
+                "drift_ratio_orientation": math.nan}
+    p1, r1 = _pose(st)
+    e_p, e_r, _, _ = _motion_error(p0, r0, p1, r1, rec.truths[0], rec.truths[n])
+    return {"drift_actions": n, "drift_ratio": e_p / total_p if total_p > 0 else math.nan,
+            "drift_ratio_orientation": e_r / total_r if total_r > 0 else math.nan,
+            "drift_position_mm": e_p * 1e3, "drift_orientation_deg": e_r}
+
+
+def gap_report(settings: GapSettings,
+               ladder: tuple[tuple[str, tuple[str, ...]], ...] = LADDER) -> dict:
+    """Record the actions once, then measure every rung of `ladder` on them. The top-level
+    ratios are the full model's (the last rung)."""
+    t0 = time.perf_counter()
+    rec = record_actions(settings)
+    if len(rec.commands) < 2:
+        raise UserError(f"{settings.object}: the grasp was lost at the first action; "
+                        "nothing to measure")
+    configs = [{"name": name, **measure_gap(rec, terms, settings)} for name, terms in ladder]
+    full = configs[-1]
+    true_p = [np.linalg.norm(b.position - a.position) * 1e3
+              for a, b in zip(rec.truths, rec.truths[1:], strict=False)]
+    true_r = [_angle_deg(b.rotation @ a.rotation.T)
+              for a, b in zip(rec.truths, rec.truths[1:], strict=False)]
+    return {
+        "object": settings.object, "hand": settings.hand, "seed": settings.seed,
+        "actions": len(rec.commands) - 1, "grasp_lost_at": rec.dropped_at,
+        "rolling_substeps": settings.rolling_substeps,
+        "true_motion": {"position_mm_mean": float(np.mean(true_p)),
+                        "orientation_deg_mean": float(np.mean(true_r))},
+        "ratio_position_mean": full["ratio_position_mean"],
+        "ratio_orientation_mean": full["ratio_orientation_mean"],
+        "drift_ratio": full["drift_ratio"],
+        "drift_ratio_orientation": full["drift_ratio_orientation"],
+        "configs": configs,
+        "seconds": time.perf_counter() - t0,
+    }
+
+
+def format_report(rep: dict) -> str:
+    """A table a person reads: one row per model rung."""
+    head = (f"{rep['object']} ({rep['hand']}), seed {rep['seed']}: {rep['actions']} actions, "
+            f"true motion {rep['true_motion']['position_mm_mean']:.2f} mm / "
+            f"{rep['true_motion']['orientation_deg_mean']:.2f} deg per action"
+            + (f"; grasp lost at action {rep['grasp_lost_at']}" if rep["grasp_lost_at"] else ""))
+    cols = f"{'model':28s} {'ratio pos':>10s} {'ratio ori':>10s} {'drift pos':>10s} " \
+           f"{'drift ori':>10s} {'static mm':>10s} {'static deg':>10s} {'joint deg':>10s}"
+    lines = [head, cols]
+    for c in rep["configs"]:
+        s = c["static"]
+        lines.append(f"{c['name']:28s} {c['ratio_position_mean']:10.3f} "
+                     f"{c['ratio_orientation_mean']:10.3f} {c['drift_ratio']:10.3f} "
+                     f"{c['drift_ratio_orientation']:10.3f} {s['position_mm_mean']:10.2f} "
+                     f"{s['orientation_deg_mean']:10.2f} {s['joint_deg_mean']:10.2f}"
+                     + (f"  ({c['failed_solves']} failed solves)" if c["failed_solves"] else ""))
+    return "\n".join(lines)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("gap", help="the model-world gap from the simulator's true state: "
+                       "per-action, static and open-loop drift, model term by term")
+    p.add_argument("--object", default="apple",
+                   help=f"object name or spec file, a comma list, or 'all' ({', '.join(OBJECTS)})")
+    p.add_argument("--hand", default="modelo", help="hand name or spec file (default modelo)")
+    p.add_argument("--seed", type=int, default=0, help="seeds the random actions")
+    p.add_argument("--actions", type=int, default=30, help="random actions (default 30)")
+    p.add_argument("--drift-actions", type=int, default=15,
+                   help="actions predicted open loop for the drift (default 15)")
+    p.add_argument("--substeps", type=int, default=1,
+                   help="solves per action with rolling contacts (default 1)")
+    p.add_argument("--json", help="write the report (per object, per model rung) as JSON")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from vlr.io import write_json_atomic
+
+    names = OBJECTS if args.object == "all" else tuple(
+        o.strip() for o in args.object.split(",") if o.strip())
+    if not names:
+        raise UserError(f"--object {args.object!r} names no object")
+    if args.json and not Path(args.json).resolve().parent.is_dir():
+        raise UserError(f"--json {args.json}: its folder does not exist")
+    reports = []
+    for name in names:
+        settings = GapSettings(object=name, hand=args.hand, seed=args.seed,
+                               actions=args.actions, drift_actions=args.drift_actions,
+                               rolling_substeps=args.substeps)
+        rep = gap_report(settings)
+        print(format_report(rep) + "\n", flush=True)
+        reports.append(rep)
+    if args.json:
+        write_json_atomic(args.json, reports[0] if len(reports) == 1 else {"objects": reports})
+        print(f"wrote {args.json}")
+    return 0

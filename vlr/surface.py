@@ -1,0 +1,133 @@
+"""Rolling contacts: the object's local surface at each contact and the contact update
+(METHOD.md 8.2 "Rolling"; issue 5, model term (a) and (b)).
+
+A fingertip pad is a sphere of known radius. Within one action the motion model pins each
+pad's material contact point to the object's (Eq. 8 as a penalty): the pad pivots about it.
+For a pad rolling without slip that is exact to first order, since the instantaneous motion
+of a rolling contact is a rotation about the contact point; what the pin misses is that the
+contact itself travels, over the pad and over the object. Without the update the pivot stays
+at the grasp's contact points, and over a sequence of actions the prediction drifts (8-9% of
+the motion over 15 actions in a feasibility study, under 2% with rolling).
+
+`roll_contacts` is that update, applied after each solve: the new contact is where the pad
+sphere now touches the object's LOCAL surface at the previous contact. The local surface is
+described by its kind and curvature (known from the object, `LocalSurface.from_spec`) and
+anchored at each particle's own contact point and normal, so the filter needs no global
+object model: a plane (a box face: exact), a sphere of radius rho (the apple), or a cylinder
+of radius rho about an axis fixed in O (the wine glass's bowl, the screwdriver's handle, a
+cup's wall). Treating a sphere as flat was measured to raise the per-action gap to 0.11.
+
+Known limits: sliding is not modelled (friction is assumed to hold), nor is the second-order
+error within one action (`MotionConfig.rolling_substeps` splits an action to shrink it).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from vlr.kinematics import HandModel, contact_points, plane_rotation
+from vlr.spec import ObjectSpec
+
+__all__ = ["LocalSurface", "surface_normals", "roll_contacts"]
+
+KINDS = ("plane", "sphere", "cylinder")
+
+
+@dataclass(frozen=True)
+class LocalSurface:
+    """The object's surface near a contact.
+
+    Attributes:
+        kind: "plane", "sphere" (radius rho) or "cylinder" (radius rho about `axis`).
+        radius: rho [m]; ignored for a plane.
+        axis: the cylinder's axis in the object frame O (unit vector).
+    """
+
+    kind: str = "plane"
+    radius: float = math.inf
+    axis: tuple[float, float, float] = (0.0, 0.0, 1.0)
+
+    def __post_init__(self) -> None:
+        if self.kind not in KINDS:
+            raise ValueError(f"local surface kind {self.kind!r}: expected one of {KINDS}")
+        if self.kind != "plane" and not (0 < self.radius < math.inf):
+            raise ValueError(f"local surface radius {self.radius!r} m must be positive and "
+                             f"finite for a {self.kind}")
+        a = np.asarray(self.axis, dtype=float)
+        if a.shape != (3,) or not np.isclose(np.linalg.norm(a), 1.0):
+            raise ValueError(f"local surface axis {self.axis!r} must be a unit 3-vector")
+
+    @classmethod
+    def from_spec(cls, spec: ObjectSpec) -> LocalSurface:
+        """The surface the fingertips touch, from the object's primitive shape (the
+        builders in sim/model.py): a box's faces are planes, a sphere is a sphere, a
+        cylinder's side (vertical, or along x_O when `extras.horizontal`) a cylinder. A mesh
+        object falls back to a plane (its local curvature is not known to the spec)."""
+        if spec.shape == "sphere":
+            return cls("sphere", float(spec.size[0]))
+        if spec.shape == "cylinder":
+            axis = (1.0, 0.0, 0.0) if spec.extras.get("horizontal") else (0.0, 0.0, 1.0)
+            return cls("cylinder", float(spec.size[0]), axis)
+        return cls("plane")
+
+
+def _distal_rotations(model: HandModel, theta: np.ndarray) -> np.ndarray:
+    """(P, N, 3, 3) rotation of each distal frame D in the palm frame."""
+    return np.einsum("nab,pnbc->pnac", model.base_rot, plane_rotation(theta.sum(axis=-1)))
+
+
+def surface_normals(model: HandModel, theta: np.ndarray, normals: np.ndarray,
+                    rot: np.ndarray) -> np.ndarray:
+    """(P, N, 3) the object's outward surface normal at each contact, in O: minus the pad's
+    outward normal there (the surfaces are tangent at a contact)."""
+    n_palm = np.einsum("pnab,pnb->pna", _distal_rotations(model, theta), normals)
+    return -np.einsum("pba,pnb->pna", rot, n_palm)
+
+
+def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
+                  normals: np.ndarray, anchors: np.ndarray, pos: np.ndarray, rot: np.ndarray,
+                  segments: np.ndarray, normals_before: np.ndarray,
+                  ) -> tuple[np.ndarray, np.ndarray]:
+    """Move each contact to where the pad now touches the object's local surface.
+
+    Args:
+        theta, normals, anchors, pos, rot, segments: the particles after a fixed-contact
+            solve (`vlr.motion.ParticleState` arrays).
+        normals_before: (P, N, 3) the object's surface normals at the contacts in O before
+            that solve (`surface_normals`): material to the object, so the solve left them.
+    Returns:
+        (normals, anchors): the new pad normals in D and contact points in O. The pad's
+        material contact point equals the new anchor, so the grasp penalty (Eq. 8) stays
+        satisfied and the POM pose is unchanged.
+    """
+    radius = model.pad_radius[None, :, None]
+    centre_palm = contact_points(model, theta, np.zeros_like(normals), segments)
+    centre = np.einsum("pba,pnb->pna", rot, centre_palm - pos[:, None, :])
+    m = normals_before
+    if surface.kind == "plane":
+        out = m
+    else:
+        rho = surface.radius
+        if surface.kind == "cylinder":
+            axis = np.asarray(surface.axis, dtype=float)
+            m_side = m - np.einsum("pni,i->pn", m, axis)[..., None] * axis
+            side_len = np.linalg.norm(m_side, axis=-1, keepdims=True)
+            # A contact on an end face (normal within 60 degrees of the axis) is flat.
+            on_side = side_len > 0.5
+            m_side = m_side / np.where(on_side, side_len, 1.0)
+            d = centre - (anchors - rho * m_side)    # from the local axis of curvature
+            d = d - np.einsum("pni,i->pn", d, axis)[..., None] * axis
+            d_len = np.linalg.norm(d, axis=-1, keepdims=True)
+            out = np.where(on_side, d / np.where(d_len > 0, d_len, 1.0), m)
+        else:
+            d = centre - (anchors - rho * m)    # from the local centre of curvature
+            out = d / np.linalg.norm(d, axis=-1, keepdims=True)
+    new_anchors = centre - radius * out
+    n_palm = -np.einsum("pab,pnb->pna", rot, out)
+    new_normals = np.einsum("pnba,pnb->pna", _distal_rotations(model, theta), n_palm)
+    return (np.ascontiguousarray(new_normals / np.linalg.norm(new_normals, axis=-1,
+                                                               keepdims=True)),
+            np.ascontiguousarray(new_anchors))
