@@ -7,6 +7,7 @@ a separate, sim-only accessor (`SimHand.truth()`), used to score the estimator, 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 os.environ.setdefault("MUJOCO_GL", "egl")
@@ -27,6 +28,10 @@ from vlr.spec import (  # noqa: E402
     load_object,
     with_finger,
 )
+
+# A scene builder: (true hand, object, width=, height=, fovy_deg=) -> the MJCF root
+# (`sim.model.build_scene` and its signature); task scenes (sim/scenes.py) pass their own.
+SceneBuilder = Callable[..., object]
 
 MAX_STEP = 0.002        # m per apply(): beyond this the ramp is no longer an exploratory action
 COMMAND_RANGE = (-0.002, 0.040)   # m of spool pull from the open-hand zero
@@ -94,17 +99,28 @@ class SimHand:
 
     Deterministic for a seed: the seed drives only the camera degradations (noise, drops);
     physics is deterministic given the commands.
+
+    Args:
+        object, hand: specs (names, paths or loaded specs).
+        seed: camera-degradation seed.
+        options: sim settings.
+        scene: the scene builder (default `sim.model.build_scene`); task scenes pass theirs
+            (`sim.scenes`: the maze, the cups).
+        held: the held object's name prefix in the scene: body `<held>/object`, free joint
+            `<held>/object_free/`, helper weld `<held>_hold` ("object" in `build_scene`).
     """
 
     def __init__(self, object: str | ObjectSpec = "apple", hand: str | HandSpec = "modelo",
-                 seed: int = 0, options: SimOptions | None = None) -> None:
+                 seed: int = 0, options: SimOptions | None = None,
+                 scene: SceneBuilder | None = None, held: str = "object") -> None:
         self.options = options or SimOptions()
         self._nominal = hand if isinstance(hand, HandSpec) else load_hand(hand)
         self._object = object if isinstance(object, ObjectSpec) else load_object(object)
         self._true = apply_overrides(self._nominal, self.options.overrides)
         opts = self.options
-        built = compile_scene(build_scene(self._true, self._object, width=opts.width,
-                                          height=opts.height, fovy_deg=opts.fovy_deg))
+        builder = scene or build_scene
+        built = compile_scene(builder(self._true, self._object, width=opts.width,
+                                      height=opts.height, fovy_deg=opts.fovy_deg))
         self.model = built.model
         self.data = mujoco.MjData(self.model)
         self.rng = np.random.default_rng(seed)
@@ -117,9 +133,7 @@ class SimHand:
                                 m.joint(f"{s}/distal").qposadr[0]] for s in self._slots])
         self._dadr = np.array([[m.joint(f"{s}/proximal").dofadr[0],
                                 m.joint(f"{s}/distal").dofadr[0]] for s in self._slots])
-        self._obj_body = m.body("object/object").id
-        self._obj_dof = m.joint("object/object_free/").dofadr[0]
-        self._weld = m.equality("object_hold").id
+        self._bind_object(held)
         # Tendon length at the open stops: the zero of the command u (vlr/spec.py).
         # The fixed tendon's length is -(r_p q_p + r_d q_d) (sim/model.py).
         self._l_open = np.array([-np.dot(m.finger.pulley_radii, m.finger.open_angles)
@@ -270,6 +284,14 @@ class SimHand:
         return self._slots
 
     # ----------------------------------------------------------------- internals
+    def _bind_object(self, held: str) -> None:
+        """Point the hand at the held object `held` (name prefix, class docstring): the
+        grasp, settling, grasp checks and ground truth follow it."""
+        m = self.model
+        self._obj_body = m.body(f"{held}/object").id
+        self._obj_dof = m.joint(f"{held}/object_free/").dofadr[0]
+        self._weld = m.equality(f"{held}_hold").id
+
     def _reset_state(self) -> None:
         mujoco.mj_resetData(self.model, self.data)
         for i, m in enumerate(self._true.mounts):

@@ -1,4 +1,5 @@
-"""Task scenes beyond a hand holding one object: the marble maze (tasks/maze.py).
+"""Task scenes beyond a hand holding one object: the marble maze (tasks/maze.py) and the
+cup-stacking table (tasks/cups.py).
 
 `MazeHand` is a `SimHand` whose held object (models/objects/maze_holder.yaml) carries a post
 and a maze plate with walls, plus a marble: a free body parked off the plate (welded to the
@@ -7,15 +8,23 @@ identification. The maze's walls come from the task as segments in the plate fra
 at the plate's top centre, axes those of the object frame O), so that the layout lives with
 the task and the sim only builds it.
 
-Ground truth here (marble position, plate pose) is for scoring and `info` only.
+`CupsHand` is a `SimHand` on an arm: the palm rides on three servoed slide joints (the wrist
+of an arm with known kinematics, moved by `move_arm`; its orientation is fixed), palm
+facing down over a table with five upside-down cups (models/objects/cup1..5.yaml), their
+tags on top where the palm camera sees them when the hand comes from above. Each cup but
+the target rests tilted on a small support block (a 12 x 20 mm block whose height sets the
+tilt), so its pose in the hand after a pick is unknown. The held object is whichever cup
+`select` names; `grasp` picks it where it stands (no reset: the rest of the table keeps
+its state).
+
+Ground truth here (marble position, plate pose, cup poses) is for scoring and `info` only.
 """
 
 from __future__ import annotations
 
-import contextlib
 import math
 import os
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Sequence
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
@@ -24,12 +33,19 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from dm_control import mjcf  # noqa: E402
 
-import sim.backend as _backend  # noqa: E402
-from sim.backend import SimHand, SimOptions  # noqa: E402
-from sim.model import TAG_CARD_THICKNESS, build_scene  # noqa: E402
+from sim.backend import COMMAND_RANGE, MAX_STEP, SimHand, SimOptions  # noqa: E402
+from sim.model import (  # noqa: E402
+    SOLREF,
+    TAG_CARD_THICKNESS,
+    build_hand,
+    build_object,
+    build_scene,
+)
+from vlr.hand import ApplyReport, GraspError  # noqa: E402
 from vlr.spec import HandSpec, ObjectSpec, load_object  # noqa: E402
 
-__all__ = ["plate_mount", "build_maze_scene", "MazeHand"]
+__all__ = ["plate_mount", "build_maze_scene", "MazeHand", "CUPS", "build_cups_scene",
+           "CupsHand", "cup_rim_depth"]
 
 MARBLE_PARK = (0.30, 0.0, 0.02)     # m, world: off the hand, out of every view
 MARBLE_COLOR = (0.15, 0.35, 0.85, 1.0)
@@ -110,18 +126,6 @@ def build_maze_scene(hand: HandSpec, obj: ObjectSpec, walls: Sequence[Sequence[f
     return root
 
 
-@contextlib.contextmanager
-def _scene_builder(builder: Callable[..., mjcf.RootElement]) -> Iterator[None]:
-    """SimHand composes its scene with `sim.backend.build_scene`; swap in a task's builder
-    for the duration of one construction (SimHand takes no scene argument)."""
-    original = _backend.build_scene
-    _backend.build_scene = builder
-    try:
-        yield
-    finally:
-        _backend.build_scene = original
-
-
 class MazeHand(SimHand):
     """A `SimHand` holding the maze holder, with a marble (module docstring).
 
@@ -139,8 +143,7 @@ class MazeHand(SimHand):
         def builder(hand_spec, obj_spec, **kw):
             return build_maze_scene(hand_spec, obj_spec, walls, **kw)
 
-        with _scene_builder(builder):
-            super().__init__(object=spec, hand=hand, seed=seed, options=options)
+        super().__init__(object=spec, hand=hand, seed=seed, options=options, scene=builder)
         m = self.model
         self._marble_body = m.body("marble").id
         self._marble_qadr = m.joint("marble_free").qposadr[0]
@@ -179,3 +182,218 @@ class MazeHand(SimHand):
         """Ground truth: the plate normal's angle from the world vertical [deg]."""
         z = self.data.site_xmat[self._plate_site].reshape(3, 3)[:, 2]
         return float(math.degrees(math.acos(np.clip(z[2], -1.0, 1.0))))
+
+
+# --------------------------------------------------------------------------- cup stacking
+
+CUPS = ("cup1", "cup2", "cup3", "cup4", "cup5")   # largest (the target) first
+ARM_HOME = (0.0, -0.25, 0.45)     # m, world: the wrist's start, palm facing down
+PALM_DOWN = (0.0, 1.0, 0.0, 0.0)  # quat (w, x, y, z): the palm turned by pi about x
+ARM_KP, ARM_KV, ARM_DAMPING = 2.0e4, 400.0, 50.0   # N/m, N s/m: a stiff arm's position loop
+TABLE_COLOR = (0.55, 0.45, 0.35, 1.0)
+SUPPORT_COLOR = (0.30, 0.30, 0.30, 1.0)
+
+
+def cup_rim_depth(obj: ObjectSpec) -> float:
+    """The rim's distance from the tag face along z_O [m] (card + wall height)."""
+    return TAG_CARD_THICKNESS + 2 * obj.size[1]
+
+
+def build_cups_scene(hand: HandSpec, obj: ObjectSpec, cups: Sequence[ObjectSpec], *,
+                     width: int = 640, height: int = 480,
+                     fovy_deg: float = 60.0) -> mjcf.RootElement:
+    """The hand on an arm (three servoed slide joints at the wrist, palm down, at
+    `ARM_HOME`), a table (top at z = 0), the
+    cups as free bodies (`<cup>/object`, weld `<cup>_hold` kept off: no helper here) parked
+    in a row, and one mocap support block per cup (placed by `CupsHand.arrange`). `obj` is
+    unused (the held cup is chosen at run time); it keeps `SceneBuilder`'s signature."""
+    root = build_hand(hand, width=width, height=height, fovy_deg=fovy_deg)
+    palm = root.find("body", "palm")
+    palm.pos = list(ARM_HOME)
+    palm.quat = list(PALM_DOWN)
+    palm.gravcomp = 1.0      # the arm carries the palm's own weight
+    # The arm: three slide joints at the wrist, each a stiff position servo. A mocap palm
+    # would be teleported: contacts see no velocity at a mocap body, so its fingers' friction
+    # never lifted a cup (measured); joints give the fingers real velocities. Axes are in the
+    # palm frame (turned by pi about x): these point along world +x, +y, +z.
+    for name, axis in (("arm_x", [1, 0, 0]), ("arm_y", [0, -1, 0]), ("arm_z", [0, 0, -1])):
+        palm.add("joint", name=name, type="slide", axis=axis, damping=ARM_DAMPING,
+                 armature=0.5)
+        root.actuator.add("position", name=f"{name}_act", joint=name, kp=ARM_KP,
+                          kv=ARM_KV, ctrllimited=False)
+    root.worldbody.add("geom", name="table", type="box", size=[0.45, 0.30, 0.01],
+                       pos=[0.15, 0.0, -0.01], rgba=list(TABLE_COLOR), condim=3,
+                       friction=[0.8, 0.005, 0.0001], solref=list(SOLREF), group=2)
+    for k, spec in enumerate(cups):
+        croot = build_object(spec)
+        croot.model = spec.name
+        frame = root.worldbody.attach(croot)
+        frame.pos = [0.12 * k, 0.35, cup_rim_depth(spec)]
+        frame.quat = list(PALM_DOWN)            # upside down: the tag on top
+        frame.add("freejoint", name="object_free")
+        root.equality.add("weld", name=f"{spec.name}_hold", body1=f"{spec.name}/object",
+                          body2="palm", solref=[0.01, 1], active=False)
+        sup = root.worldbody.add("body", name=f"{spec.name}_support", mocap=True,
+                                 pos=[0.12 * k, 0.45, 0.005])
+        sup.add("geom", name=f"{spec.name}_support", type="box", size=[0.006, 0.010, 0.005],
+                rgba=list(SUPPORT_COLOR), condim=3, friction=[0.8, 0.005, 0.0001],
+                solref=list(SOLREF), group=2)
+    # A view of the table and the stack, for render_mode="rgb_array" and the picture.
+    root.worldbody.add("camera", name="cups_camera", pos=[0.24, -0.55, 0.42],
+                       xyaxes=[1, 0, 0, 0, 0.55, 0.835], fovy=45)
+    root.worldbody.add("camera", name="stack_camera", pos=[0.0, -0.42, 0.30],
+                       xyaxes=[1, 0, 0, 0, 0.3, 0.954], fovy=45)
+    return root
+
+
+class CupsHand(SimHand):
+    """A `SimHand` on an arm over a table of upside-down cups (module docstring).
+
+    Args:
+        cups: the cup specs (names or ObjectSpec), largest (the target) first.
+        hand, seed, options: as `SimHand`'s.
+    """
+
+    def __init__(self, cups: Sequence[str | ObjectSpec] = CUPS, hand: str | HandSpec =
+                 "modelo", seed: int = 0, options: SimOptions | None = None) -> None:
+        specs = [c if isinstance(c, ObjectSpec) else load_object(c) for c in cups]
+        if len(specs) < 2:
+            raise ValueError("cup stacking needs a target cup and at least one more")
+        self.cups = {s.name: s for s in specs}
+
+        def builder(hand_spec, obj_spec, **kw):
+            return build_cups_scene(hand_spec, obj_spec, specs, **kw)
+
+        super().__init__(object=specs[1], hand=hand, seed=seed, options=options,
+                         scene=builder, held=specs[1].name)
+        m = self.model
+        self._palm = m.body("palm").id
+        self._arm_act = np.array([m.actuator(f"{n}_act").id for n in ("arm_x", "arm_y",
+                                                                        "arm_z")])
+        self._cup_qadr = {n: m.joint(f"{n}/object_free/").qposadr[0] for n in self.cups}
+        self._cup_dadr = {n: m.joint(f"{n}/object_free/").dofadr[0] for n in self.cups}
+        self._cup_body = {n: m.body(f"{n}/object").id for n in self.cups}
+        self._support = {n: m.body_mocapid[m.body(f"{n}_support").id] for n in self.cups}
+        self.held = specs[1].name
+
+    def _reset_state(self) -> None:
+        super()._reset_state()
+        self.data.eq_active[:] = 0     # no helper welds here: picks are physical
+        mujoco.mj_forward(self.model, self.data)
+
+    # ----------------------------------------------------------------- the arm
+    def arm_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """The wrist (palm frame) in the world: position [m] and rotation (3, 3): the arm's
+        own kinematics, known to the controller."""
+        d = self.data
+        return d.xpos[self._palm].copy(), d.xmat[self._palm].reshape(3, 3).copy()
+
+    def gravity_in_palm(self) -> np.ndarray:
+        """Gravity in the palm frame [m/s^2], from the arm's pose (for the motion model)."""
+        _, rot = self.arm_pose()
+        return rot.T @ np.asarray(self.model.opt.gravity)
+
+    def move_arm(self, position: Sequence[float], speed: float = 0.25) -> None:
+        """Move the wrist in a straight line to `position` [m] at `speed` [m/s] (a smooth
+        ramp, physics stepping, tendon commands held), then let the held cup settle."""
+        d = self.data
+        home = np.asarray(ARM_HOME)
+        start = d.ctrl[self._arm_act] + home
+        goal = np.asarray(position, dtype=float)
+        n = max(1, int(np.linalg.norm(goal - start) / speed / self.model.opt.timestep))
+        for k in range(1, n + 1):
+            s = k / n
+            s = s * s * (3 - 2 * s)                 # smoothstep: no jerk at the ends
+            d.ctrl[self._arm_act] = start + (goal - start) * s - home
+            mujoco.mj_step(self.model, d)
+        self._settle()
+
+    # ----------------------------------------------------------------- the table
+    def select(self, name: str) -> None:
+        """Hold `name` from now on: grasp, checks and ground truth follow this cup."""
+        if name not in self.cups:
+            raise ValueError(f"no cup {name!r}; cups: {sorted(self.cups)}")
+        self._bind_object(name)
+        self._object = self.cups[name]
+        self.held = name
+
+    def arrange(self, poses: dict[str, tuple[np.ndarray, np.ndarray]],
+                supports: dict[str, np.ndarray], settle: float = 0.5) -> None:
+        """Place cups (world position of O [m], quaternion (w, x, y, z)) and support blocks
+        (world position [m]), at rest, then let them settle on the table for `settle` s."""
+        d = self.data
+        for name, (pos, quat) in poses.items():
+            q = self._cup_qadr[name]
+            d.qpos[q:q + 3] = pos
+            d.qpos[q + 3:q + 7] = quat
+            d.qvel[self._cup_dadr[name]:self._cup_dadr[name] + 6] = 0.0
+        for name, pos in supports.items():
+            d.mocap_pos[self._support[name]] = pos
+        mujoco.mj_forward(self.model, d)
+        self.wait(settle)
+
+    def wait(self, seconds: float) -> None:
+        """Let time pass with the commands and the arm held."""
+        n = int(round(seconds / self.model.opt.timestep))
+        if n > 0:
+            mujoco.mj_step(self.model, self.data, nstep=n)
+
+    def cup_pose(self, name: str) -> tuple[np.ndarray, np.ndarray]:
+        """Ground truth: a cup's O frame in the world, position [m] and rotation (scoring)."""
+        b = self._cup_body[name]
+        return self.data.xpos[b].copy(), self.data.xmat[b].reshape(3, 3).copy()
+
+    # ----------------------------------------------------------------- pick and release
+    def grasp(self) -> ApplyReport:
+        """Pick the selected cup where it stands under the open hand: close each tendon
+        until it reaches its grasp tension (as `SimHand.grasp`, but without resetting the
+        scene or a helper weld: the table and the support hold the cup while the fingers
+        close), top the tensions up, lift the arm by `lift` and settle."""
+        opts = self.options
+        target = np.array([opts.grasp_tension[0] if s == "thumb" else opts.grasp_tension[1]
+                           for s in self._slots])
+        dt = self.model.opt.timestep
+        du = opts.close_speed * dt
+        done = np.zeros(len(self._slots), bool)
+        for _ in range(int(3.0 / dt)):
+            done |= self.static_tensions() >= target
+            if done.all() or np.any(self._u + du > COMMAND_RANGE[1]):
+                break
+            self._u = np.where(done, self._u, self._u + du)
+            self._set_ctrl(self._u)
+            mujoco.mj_step(self.model, self.data)
+        if not done.all():
+            names = [s for s, ok in zip(self._slots, done, strict=True) if not ok]
+            raise GraspError(f"{self.held}: fingers {names} never reached their grasp "
+                             f"tension (commands {np.round(self._u * 1e3, 2).tolist()} mm)")
+        self._settle()
+        for _ in range(6):   # fingers keep wrapping after the first touch (SimHand.grasp)
+            short = target - self.static_tensions()
+            if np.all(np.abs(short) < 0.05 * target):
+                break
+            self._ramp_to(self._u + np.clip(short / self._true.tendon_stiffness,
+                                            -MAX_STEP, MAX_STEP))
+            self._settle()
+        pos, _ = self.arm_pose()
+        self.move_arm(pos + np.array([0.0, 0.0, self.lift]), speed=0.05)
+        settled = self._settle()
+        held, message = self._grasp_status()
+        if not held:
+            raise GraspError(f"{self.held}: no stable fingertip grasp after the pick: "
+                             f"{message}")
+        self._grasped = True
+        return ApplyReport(commands=self.commands, settled=settled, grasp_held=True)
+
+    lift = 0.03   # m: the arm lifts the picked cup off its support before identification
+
+    def release(self, seconds: float = 0.4) -> None:
+        """Open the hand: ramp every tendon command to zero over `seconds`, then wait as
+        long again (the cup drops the last millimetres onto the stack)."""
+        start = self._u.copy()
+        n = max(1, int(round(seconds / self.model.opt.timestep)))
+        for k in range(1, n + 1):
+            self._set_ctrl(start * (1 - k / n))
+            mujoco.mj_step(self.model, self.data)
+        self._u = np.zeros(len(self._slots))
+        self.wait(seconds)
+        self._grasped = False
