@@ -29,7 +29,7 @@ import numpy as np
 from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
 from vlr.kinematics import HandModel
-from vlr.motion import MotionConfig, MotionModel, ObjectParams, ParticleState
+from vlr.motion import STATUS, MotionConfig, MotionModel, ObjectParams, ParticleState
 
 __all__ = ["LADDER", "GapSettings", "record_actions", "measure_gap", "gap_report", "register"]
 
@@ -164,11 +164,12 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings) -
         static.append((float(np.linalg.norm(p0 - t0.position)),
                        _angle_deg(r0 @ t0.rotation.T),
                        float(np.degrees(np.abs(st.theta[0] - t0.theta)).mean())))
-        motion.solve(st, rec.commands[k + 1], u_from=rec.commands[k])
+        status, iters = motion.solve(st, rec.commands[k + 1], u_from=rec.commands[k])
         ok = bool(st.valid[0])
         p1, r1 = _pose(st)
         e_p, e_r, m_p, m_r = _motion_error(p0, r0, p1, r1, t0, t1)
-        rows.append({"action": k + 1, "ok": ok, "error_position_mm": e_p * 1e3,
+        rows.append({"action": k + 1, "ok": ok, "status": STATUS[int(status[0])],
+                     "newton_iterations": int(iters[0]), "error_position_mm": e_p * 1e3,
                      "error_orientation_deg": e_r, "motion_position_mm": m_p * 1e3,
                      "motion_orientation_deg": m_r,
                      "ratio_position": e_p / m_p if m_p > 0 else math.nan,

@@ -17,6 +17,7 @@ from vlr.motion import (
     rotvec_to_matrix,
 )
 from vlr.spec import load_hand
+from vlr.surface import LocalSurface
 
 OBJ = ObjectParams(mass=0.12, com=(0.0, 0.0, 0.03))
 THETA0 = (-0.3, 1.2)
@@ -68,6 +69,38 @@ def test_gradient_and_hessian_match_reference(modelo):
                         - f(h * (eye[j] - eye[i])) + f(-h * (eye[i] + eye[j]))) / (4 * h * h)
                        for j in range(12)] for i in range(12)])
     np.testing.assert_allclose(H, H_num, atol=1e-6 * np.abs(H).max())
+
+
+@pytest.mark.parametrize("surface", [LocalSurface("sphere", 0.04), LocalSurface("plane")])
+def test_rolling_gradient_and_hessian_match_reference(modelo, surface):
+    """The rolling term (pad sphere on the object's local sphere, no tangential slip of the
+    previous contacts) against finite differences of its NumPy reference."""
+    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=surface)
+    cfg = MotionConfig(terms=MotionConfig().terms + ("rolling",))
+    mm0, st, u0 = grasp(modelo)
+    mm = MotionModel(modelo, obj, cfg)
+    roll = mm.rolling_frames(st)[0]
+    rng = np.random.default_rng(3)
+    st.theta += rng.normal(0, 0.02, st.theta.shape)
+    st.rot[0] = st.rot[0] @ rotvec_to_matrix(rng.normal(0, 0.02, 3))
+    st.pos[0] += rng.normal(0, 2e-4, 3)
+
+    def f(x):
+        return reference_energy(mm, st, 0, u0, st.theta[0] + x[:6].reshape(3, 2),
+                                st.pos[0] + x[6:9], st.rot[0] @ rotvec_to_matrix(x[9:]),
+                                roll)
+
+    e, g, H = mm.evaluate(st, 0, u0, roll)
+    assert e == pytest.approx(f(np.zeros(12)), rel=1e-10)
+    h = 1e-7
+    eye = np.eye(12)
+    g_num = np.array([(f(h * eye[i]) - f(-h * eye[i])) / (2 * h) for i in range(12)])
+    np.testing.assert_allclose(g, g_num, atol=1e-5 * np.abs(g).max() + 1e-6)
+    h = 1e-5
+    H_num = np.array([[(f(h * (eye[i] + eye[j])) - f(h * (eye[i] - eye[j]))
+                        - f(h * (eye[j] - eye[i])) + f(-h * (eye[i] + eye[j]))) / (4 * h * h)
+                       for j in range(12)] for i in range(12)])
+    np.testing.assert_allclose(H, H_num, atol=2e-6 * np.abs(H).max())
 
 
 def test_equilibrium_is_stationary_and_matches_scipy(modelo):

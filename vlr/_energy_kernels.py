@@ -19,15 +19,16 @@ import math
 import numpy as np
 from numba import njit, prange
 
-SPRINGS, TENDON, LIMITS, LINK_GRAVITY, OBJECT_GRAVITY, CONTACTS = range(6)
-N_TERMS = 6
+SPRINGS, TENDON, LIMITS, LINK_GRAVITY, OBJECT_GRAVITY, CONTACTS, ROLLING = range(7)
+N_TERMS = 7
 
 # Solver status codes (per particle).
 OK, NONFINITE, NO_CONVERGENCE, JUMP, INACTIVE = 0, 1, 2, 3, 4
 
 # Indices into the float parameter vector `prm`.
-P_KC, P_KLIM, P_TOL_TH, P_TOL_P, P_MAX_DTH, P_MAX_DP, P_JUMP_TH, P_JUMP_P, P_MU0 = range(9)
-N_PRM = 9
+P_KC, P_KLIM, P_TOL_TH, P_TOL_P, P_MAX_DTH, P_MAX_DP, P_JUMP_TH, P_JUMP_P, P_MU0, P_RHO = \
+    range(10)
+N_PRM = 10
 
 
 @njit(cache=True)
@@ -53,12 +54,76 @@ def _finger_chain(th, seg, nrm, pcx, pcy, prad, sphi, cphi, qy, qz):
 
 
 @njit(cache=True)
-def _evaluate(th, seg, nrm, anc, p, R, stiff, kt, u,
+def _pair(i, k_n, px, py, pz, ax, ay, az, gam, Gam, rb, R, qy, qz, jac, M, lam, gt,
+          gA, A, B, gC, C):
+    """Gradient and Hessian of phi(v), v = x(theta) - (p + R a): x a point fixed in finger i's
+    distal frame ((px, py, pz) in its finger frame F), a a point fixed in O (ax, ay, az).
+    gam = dphi/dv (3,), Gam = d2phi/dv2 (3, 3), both in the palm frame; the caller adds phi.
+    grad = J^T gam; Hess = J^T Gam J + sum_a gam_a d2v_a (the geometric part)."""
+    for j in range(k_n):
+        dy = py - qy[j]
+        dz = pz - qz[j]
+        for a in range(3):
+            jac[j, a] = rb[a, 1] * dz - rb[a, 2] * dy
+    # M = R [a]x : d v / d w
+    for a in range(3):
+        M[a, 0] = R[a, 1] * az - R[a, 2] * ay
+        M[a, 1] = -R[a, 0] * az + R[a, 2] * ax
+        M[a, 2] = R[a, 0] * ay - R[a, 1] * ax
+    for j in range(k_n):
+        gA[i, j] += jac[j, 0] * gam[0] + jac[j, 1] * gam[1] + jac[j, 2] * gam[2]
+        # gt = Gam jac_j
+        for a in range(3):
+            gt[a] = Gam[a, 0] * jac[j, 0] + Gam[a, 1] * jac[j, 1] + Gam[a, 2] * jac[j, 2]
+        for m in range(j, k_n):
+            dy2 = py - qy[m]
+            dz2 = pz - qz[m]
+            # gam . R_b (0, -dy', -dz'): the geometric (force x curvature) part
+            geo = -(gam[0] * (rb[0, 1] * dy2 + rb[0, 2] * dz2)
+                    + gam[1] * (rb[1, 1] * dy2 + rb[1, 2] * dz2)
+                    + gam[2] * (rb[2, 1] * dy2 + rb[2, 2] * dz2))
+            h = jac[m, 0] * gt[0] + jac[m, 1] * gt[1] + jac[m, 2] * gt[2] + geo
+            A[i, j, m] += h
+            if m != j:
+                A[i, m, j] += h
+        for b in range(3):
+            B[i, j, b] -= gt[b]
+            B[i, j, 3 + b] += gt[0] * M[0, b] + gt[1] * M[1, b] + gt[2] * M[2, b]
+    for b in range(3):
+        gC[b] -= gam[b]
+        gC[3 + b] += M[0, b] * gam[0] + M[1, b] * gam[1] + M[2, b] * gam[2]
+        lam[b] = R[0, b] * gam[0] + R[1, b] * gam[1] + R[2, b] * gam[2]
+    la = lam[0] * ax + lam[1] * ay + lam[2] * az
+    for b in range(3):
+        for c in range(3):
+            C[b, c] += Gam[b, c]
+            # (Gam M)[b, c]
+            gm = Gam[b, 0] * M[0, c] + Gam[b, 1] * M[1, c] + Gam[b, 2] * M[2, c]
+            C[b, 3 + c] -= gm
+            C[3 + c, b] -= gm
+    for b in range(3):
+        ab = ax if b == 0 else (ay if b == 1 else az)
+        for c in range(3):
+            ac = ax if c == 0 else (ay if c == 1 else az)
+            mgm = 0.0
+            for d in range(3):
+                mgm += M[d, b] * (Gam[d, 0] * M[0, c] + Gam[d, 1] * M[1, c]
+                                  + Gam[d, 2] * M[2, c])
+            geo = 0.5 * (lam[b] * ac + ab * lam[c])
+            if b == c:
+                geo -= la
+            C[3 + b, 3 + c] += mgm - geo
+
+
+@njit(cache=True)
+def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
               base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
               omass, ocom, grav, flags, prm,
               gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk):
-    """Energy of one particle (Eq. 6, 7 compliant, 8 as penalty, limits, gravity) and its
-    gradient/Hessian in arrow form. th (N, K); p (3,); R (3, 3). Returns the energy [J]."""
+    """Energy of one particle (Eq. 6, 7 compliant, 8 as penalty or rolling, limits, gravity)
+    and its gradient/Hessian in arrow form. th (N, K); p (3,); R (3, 3); rl (N, 6) the
+    rolling contacts' local centres of curvature in O and normals in the palm frame (read
+    only with ROLLING). Returns the energy [J]."""
     n_f, k_n = th.shape
     kc = prm[P_KC]
     klim = prm[P_KLIM]
@@ -128,8 +193,59 @@ def _evaluate(th, seg, nrm, anc, p, R, stiff, kt, u,
                         A[i, j, m] += h
                         if m != j:
                             A[i, m, j] += h
+        # Rolling (METHOD.md 8.2): the pad sphere touches the object's local sphere (centre
+        # rl[i, :3] in O, radius rho; one equation) and the previous contact points do not
+        # slip tangentially to the normal rl[i, 3:] (two), as stiff penalties.
+        if flags[CONTACTS] != 0 and flags[ROLLING] != 0:
+            gam = vk[1]
+            ax, ay, az = anc[i, 0], anc[i, 1], anc[i, 2]
+            nx, ny, nz = rl[i, 3], rl[i, 4], rl[i, 5]
+            v0 = (base_pos[i, 0] + rb[0, 0] * cfx + rb[0, 1] * cfy + rb[0, 2] * cfz
+                  - p[0] - (R[0, 0] * ax + R[0, 1] * ay + R[0, 2] * az))
+            v1 = (base_pos[i, 1] + rb[1, 0] * cfx + rb[1, 1] * cfy + rb[1, 2] * cfz
+                  - p[1] - (R[1, 0] * ax + R[1, 1] * ay + R[1, 2] * az))
+            v2 = (base_pos[i, 2] + rb[2, 0] * cfx + rb[2, 1] * cfy + rb[2, 2] * cfz
+                  - p[2] - (R[2, 0] * ax + R[2, 1] * ay + R[2, 2] * az))
+            vn = v0 * nx + v1 * ny + v2 * nz
+            t0, t1, t2 = v0 - vn * nx, v1 - vn * ny, v2 - vn * nz
+            e += 0.5 * kc * (t0 * t0 + t1 * t1 + t2 * t2)
+            nv = (nx, ny, nz)
+            tv = (t0, t1, t2)
+            G = vk[3:6]
+            for a in range(3):
+                gam[a] = kc * tv[a]
+                for b in range(3):
+                    G[a, b] = kc * ((1.0 if a == b else 0.0) - nv[a] * nv[b])
+            _pair(i, k_n, cfx, cfy, cfz, ax, ay, az, gam, G, rb, R, qy, qz, jac, M,
+                  vk[2], vk[0], gA, A, B, gC, C)
+            # Pad centre (fixed in D) to the local centre of curvature (fixed in O).
+            s_last, c_last = sphi[k_n - 1], cphi[k_n - 1]
+            pcz = seg[i, k_n - 1]
+            px = pad_xy[i, 0]
+            py = qy[k_n - 1] + pad_xy[i, 1] * c_last + pcz * s_last
+            pz = qz[k_n - 1] - pad_xy[i, 1] * s_last + pcz * c_last
+            ox, oy, oz = rl[i, 0], rl[i, 1], rl[i, 2]
+            d0 = (base_pos[i, 0] + rb[0, 0] * px + rb[0, 1] * py + rb[0, 2] * pz
+                  - p[0] - (R[0, 0] * ox + R[0, 1] * oy + R[0, 2] * oz))
+            d1 = (base_pos[i, 1] + rb[1, 0] * px + rb[1, 1] * py + rb[1, 2] * pz
+                  - p[1] - (R[1, 0] * ox + R[1, 1] * oy + R[1, 2] * oz))
+            d2 = (base_pos[i, 2] + rb[2, 0] * px + rb[2, 1] * py + rb[2, 2] * pz
+                  - p[2] - (R[2, 0] * ox + R[2, 1] * oy + R[2, 2] * oz))
+            dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
+            reach = prm[P_RHO] + pad_r[i]
+            g = dist - reach
+            e += 0.5 * kc * g * g
+            dv = (d0 / dist, d1 / dist, d2 / dist)
+            sc = 1.0 - reach / dist
+            for a in range(3):
+                gam[a] = kc * g * dv[a]
+                for b in range(3):
+                    G[a, b] = kc * (sc * (1.0 if a == b else 0.0)
+                                    + (reach / dist) * dv[a] * dv[b])
+            _pair(i, k_n, px, py, pz, ox, oy, oz, gam, G, rb, R, qy, qz, jac, M,
+                  vk[2], vk[0], gA, A, B, gC, C)
         # Eq. 8 as a stiff penalty: the contact (fixed in D) stays at its anchor (fixed in O).
-        if flags[CONTACTS] != 0:
+        elif flags[CONTACTS] != 0:
             ax, ay, az = anc[i, 0], anc[i, 1], anc[i, 2]
             r = vk[0]
             for a in range(3):
@@ -319,7 +435,7 @@ def _rotate3(R, w0, w1, w2, out):
 
 
 @njit(cache=True)
-def _solve_one(q, theta, seg, nrm, anc, pos, rot, stiff, kt, u,
+def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                omass, ocom, grav, flags, prm, max_iter,
                gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk,
@@ -328,6 +444,7 @@ def _solve_one(q, theta, seg, nrm, anc, pos, rot, stiff, kt, u,
     Updates theta[q], pos[q], rot[q] in place; returns (status, iterations)."""
     n_f, k_n = theta.shape[1], theta.shape[2]
     th = theta[q]
+    rl = roll[q] if flags[ROLLING] != 0 else roll[0]
     p = pos[q]
     R = rot[q]
     for i in range(n_f):
@@ -335,7 +452,7 @@ def _solve_one(q, theta, seg, nrm, anc, pos, rot, stiff, kt, u,
             th0[i, k] = th[i, k]
     for a in range(3):
         p0[a] = p[a]
-    e = _evaluate(th, seg[q], nrm[q], anc[q], p, R, stiff[q], kt[q], u,
+    e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
                   base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                   omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk)
     if not math.isfinite(e):
@@ -388,7 +505,7 @@ def _solve_one(q, theta, seg, nrm, anc, pos, rot, stiff, kt, u,
                 p_t[a] = p[a] + t * dc[a]
             w0, w1, w2 = t * dc[3], t * dc[4], t * dc[5]
             _rotate3(R, w0, w1, w2, R_t)
-            e_t = _evaluate(th_t, seg[q], nrm[q], anc[q], p_t, R_t, stiff[q], kt[q], u,
+            e_t = _evaluate(th_t, seg[q], nrm[q], anc[q], rl, p_t, R_t, stiff[q], kt[q], u,
                             base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy,
                             pad_r, omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi,
                             qy, qz, jac, M, vk)
@@ -425,7 +542,7 @@ def _solve_one(q, theta, seg, nrm, anc, pos, rot, stiff, kt, u,
             mu *= 10.0
             if mu > 1e12:
                 break
-            e = _evaluate(th, seg[q], nrm[q], anc[q], p, R, stiff[q], kt[q], u,
+            e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
                           base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                           omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz,
                           jac, M, vk)
@@ -445,7 +562,7 @@ def _solve_one(q, theta, seg, nrm, anc, pos, rot, stiff, kt, u,
 
 
 @njit(parallel=True, cache=True, fastmath=False)
-def solve_batch(theta, seg, nrm, anc, pos, rot, stiff, kt, u,
+def solve_batch(theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                 base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                 omass, ocom, grav, flags, prm, max_iter, active, status, iters):
     """Equilibrium (Eq. 9) of every active particle at tendon command u, in place."""
@@ -464,7 +581,7 @@ def solve_batch(theta, seg, nrm, anc, pos, rot, stiff, kt, u,
         qz = np.empty(k_n)
         jac = np.empty((k_n, 3))
         M = np.empty((3, 3))
-        vk = np.empty((3, 3))
+        vk = np.empty((6, 3))
         th_t = np.empty((n_f, k_n))
         p_t = np.empty(3)
         R_t = np.empty((3, 3))
@@ -484,7 +601,7 @@ def solve_batch(theta, seg, nrm, anc, pos, rot, stiff, kt, u,
                 status[q] = INACTIVE
                 iters[q] = 0
                 continue
-            st, it = _solve_one(q, theta, seg, nrm, anc, pos, rot, stiff, kt, u,
+            st, it = _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                                 base_pos, base_rot, radii, rest, lo, hi, lmass, lcom,
                                 pad_xy, pad_r, omass, ocom, grav, flags, prm, max_iter,
                                 gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk,
@@ -494,7 +611,7 @@ def solve_batch(theta, seg, nrm, anc, pos, rot, stiff, kt, u,
 
 
 @njit(cache=True)
-def evaluate_one(th, seg, nrm, anc, p, R, stiff, kt, u,
+def evaluate_one(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                  base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                  omass, ocom, grav, flags, prm, gA, gC, A, B, C):
     """Energy, gradient and Hessian blocks of one particle (for tests and diagnostics)."""
@@ -505,7 +622,7 @@ def evaluate_one(th, seg, nrm, anc, p, R, stiff, kt, u,
     qz = np.empty(k_n)
     jac = np.empty((k_n, 3))
     M = np.empty((3, 3))
-    vk = np.empty((3, 3))
-    return _evaluate(th, seg, nrm, anc, p, R, stiff, kt, u,
+    vk = np.empty((6, 3))
+    return _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                      base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                      omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk)

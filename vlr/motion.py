@@ -14,9 +14,13 @@ Formulation (METHOD.md 8.1-8.2; the choice is ours):
   tendon 1/2 k_t max(0, u - s(theta))^2 with s = sum r_k (theta_k - lo_k) (Eq. 7 with
   compliance); joint limits as stiff one-sided penalties; gravity potential of the object and
   of the finger links under a configurable gravity vector in the palm frame.
-* Rolling (`vlr.surface`, term "rolling"): after each solve, every contact moves to where
-  the pad sphere now touches the object's local surface (plane, sphere or cylinder of known
-  curvature); within a solve the contact is pinned, which is rolling to first order.
+* Rolling (term "rolling", METHOD.md 8.2; `vlr.surface`): instead of pinning the contact,
+  each pad sphere touches the object's local surface (a sphere of the object's curvature
+  about a centre fixed in O: one equation) and the previous contact points do not slip
+  tangentially (two), as stiff penalties. The pin is rolling only to first order; its energy
+  misses the force-times-curvature stiffness of a rolling pad, which decides how far a soft
+  grasp moves (measured by `vlr gap`). After each solve the contacts move to where the pads
+  now touch (`vlr.surface.roll_contacts`).
 * Solver: per-particle Levenberg-Marquardt on the exact Hessian (arrow structure, Schur
   complement), warm-started from the particle's previous configuration, with a step limit.
   A particle whose solve fails (non-finite, no convergence, or a jump larger than an action
@@ -57,10 +61,8 @@ TERMS: dict[str, int] = {
     "link_gravity": kern.LINK_GRAVITY,
     "object_gravity": kern.OBJECT_GRAVITY,
     "contacts": kern.CONTACTS,
+    "rolling": kern.ROLLING,
 }
-
-# Terms applied between solves rather than inside the energy (no kernel code).
-POST_SOLVE_TERMS = ("rolling",)
 
 STATUS = {kern.OK: "ok", kern.NONFINITE: "non-finite", kern.NO_CONVERGENCE: "no convergence",
           kern.JUMP: "jump", kern.INACTIVE: "inactive"}
@@ -107,7 +109,7 @@ class MotionConfig:
     mu0: float = 1e-6
 
     def __post_init__(self) -> None:
-        known = set(TERMS) | set(POST_SOLVE_TERMS)
+        known = set(TERMS)
         unknown = set(self.terms) - known
         if unknown:
             raise ValueError(f"unknown energy terms {sorted(unknown)}; known: {sorted(known)}")
@@ -125,8 +127,7 @@ class MotionConfig:
     def flags(self) -> np.ndarray:
         out = np.zeros(kern.N_TERMS, dtype=np.int64)
         for t in self.terms:
-            if t in TERMS:
-                out[TERMS[t]] = 1
+            out[TERMS[t]] = 1
         return out
 
     def params(self) -> np.ndarray:
@@ -261,7 +262,23 @@ class MotionModel:
             float(obj.mass), np.asarray(obj.com, dtype=float),
             np.asarray(self.config.gravity, dtype=float))
         self._flags = self.config.flags()
-        self._prm = self.config.params()
+        self._prm = self._params(self.config)
+        self._no_roll = np.zeros((1, model.n_fingers, 6))
+
+    def _params(self, cfg: MotionConfig) -> np.ndarray:
+        prm = cfg.params()
+        prm[kern.P_RHO] = self.obj.surface.kernel_radius
+        return prm
+
+    def rolling_frames(self, state: ParticleState) -> np.ndarray:
+        """(P, N, 6) what the rolling term holds fixed during a solve: each contact's local
+        centre of curvature in O, a - rho m, and its normal in the palm frame, R m (m: the
+        object's outward normal at the contact, in O)."""
+        m = surface_normals(self.model, state.theta, state.normals, state.rot)
+        out = np.empty(m.shape[:2] + (6,))
+        out[..., :3] = state.anchors - self.obj.surface.kernel_radius * m
+        out[..., 3:] = np.einsum("pab,pnb->pna", state.rot, m)
+        return out
 
     def solve(self, state: ParticleState, u: np.ndarray, config: MotionConfig | None = None,
               u_from: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -281,7 +298,7 @@ class MotionModel:
             status (P,) int8 codes (`STATUS`), iterations (P,) int32 (summed over substeps).
         """
         cfg = config or self.config
-        prm = cfg.params() if config is not None else self._prm
+        prm = self._params(cfg) if config is not None else self._prm
         flags = cfg.flags() if config is not None else self._flags
         u = np.ascontiguousarray(u, dtype=float).reshape(self.model.n_fingers)
         steps = cfg.rolling_substeps if (cfg.rolling and u_from is not None) else 1
@@ -294,8 +311,9 @@ class MotionModel:
         for target in targets:
             before = surface_normals(self.model, state.theta, state.normals, state.rot) \
                 if cfg.rolling else None
+            roll = self.rolling_frames(state) if cfg.rolling else self._no_roll
             kern.solve_batch(state.theta, state.segments, state.normals, state.anchors,
-                             state.pos, state.rot, state.stiffness, state.tendon, target,
+                             roll, state.pos, state.rot, state.stiffness, state.tendon, target,
                              *self._shared, flags, prm, int(cfg.max_iter), state.valid,
                              status, it)
             iters += it
@@ -318,15 +336,19 @@ class MotionModel:
         else:
             state.normals[ok], state.anchors[ok] = n, a
 
-    def evaluate(self, state: ParticleState, q: int,
-                 u: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    def evaluate(self, state: ParticleState, q: int, u: np.ndarray,
+                 roll: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
         """Energy [J], gradient (N K + 6,) and dense Hessian of particle q, in the solver's
-        coordinates (theta, dp, dw). For tests and diagnostics."""
+        coordinates (theta, dp, dw). `roll`: the (N, 6) rolling frames (`rolling_frames`),
+        needed with the rolling term. For tests and diagnostics."""
+        if roll is None:
+            roll = self._no_roll[0]
         nf, nk = self.model.n_fingers, self.model.n_joints
         gA, gC = np.empty((nf, nk)), np.empty(6)
         A, B, C = np.empty((nf, nk, nk)), np.empty((nf, nk, 6)), np.empty((6, 6))
         e = kern.evaluate_one(state.theta[q], state.segments[q], state.normals[q],
-                              state.anchors[q], state.pos[q], state.rot[q],
+                              state.anchors[q], np.ascontiguousarray(roll, dtype=float),
+                              state.pos[q], state.rot[q],
                               state.stiffness[q], state.tendon[q],
                               np.asarray(u, dtype=float), *self._shared, self._flags,
                               self._prm, gA, gC, A, B, C)
@@ -347,10 +369,11 @@ class MotionModel:
 
 
 def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.ndarray,
-                     theta: np.ndarray, pos: np.ndarray, rot: np.ndarray) -> float:
+                     theta: np.ndarray, pos: np.ndarray, rot: np.ndarray,
+                     roll: np.ndarray | None = None) -> float:
     """Plain NumPy energy of particle q at configuration (theta, pos, rot), term by term
-    (Eq. 6, 7 compliant, 8 penalty, limits, gravity). The independent reference the
-    vectorised kernel is tested against."""
+    (Eq. 6, 7 compliant, 8 penalty or rolling with the (N, 6) frames `roll`, limits,
+    gravity). The independent reference the vectorised kernel is tested against."""
     m, cfg, obj = motion.model, motion.config, motion.obj
     g = np.asarray(cfg.gravity, dtype=float)
     theta = np.asarray(theta, dtype=float)
@@ -376,7 +399,16 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
         e -= np.sum(m.link_masses * (com_p @ g))
     if "object_gravity" in cfg.terms:
         e -= obj.mass * g @ (pos + rot @ np.asarray(obj.com))
-    if "contacts" in cfg.terms:
+    if "contacts" in cfg.terms and "rolling" in cfg.terms:
+        c = contact_points(m, theta, state.normals[q], state.segments[q])
+        d = c - (pos + state.anchors[q] @ rot.T)
+        n = roll[:, 3:]
+        tangential = d - np.sum(d * n, axis=-1, keepdims=True) * n
+        centre = contact_points(m, theta, np.zeros_like(state.normals[q]), state.segments[q])
+        gap = np.linalg.norm(centre - (pos + roll[:, :3] @ rot.T), axis=-1) \
+            - (obj.surface.kernel_radius + m.pad_radius)
+        e += 0.5 * cfg.contact_stiffness * (np.sum(tangential**2) + np.sum(gap**2))
+    elif "contacts" in cfg.terms:
         c = contact_points(m, theta, state.normals[q], state.segments[q])
         target = pos + state.anchors[q] @ rot.T
         e += 0.5 * cfg.contact_stiffness * np.sum((c - target) ** 2)

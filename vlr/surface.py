@@ -60,6 +60,14 @@ class LocalSurface:
         if a.shape != (3,) or not np.isclose(np.linalg.norm(a), 1.0):
             raise ValueError(f"local surface axis {self.axis!r} must be a unit 3-vector")
 
+    @property
+    def kernel_radius(self) -> float:
+        """The radius of the local sphere the motion model's rolling term uses [m]: the
+        sphere's own, a cylinder's (a sphere of its radius: exact around the axis, too
+        curved along it), and 10 m for a plane (flat within 0.1% of a pad's travel; an
+        infinite radius has no centre to hold fixed)."""
+        return 10.0 if self.kind == "plane" else self.radius
+
     @classmethod
     def from_spec(cls, spec: ObjectSpec) -> LocalSurface:
         """The surface the fingertips touch, from the object's primitive shape (the
