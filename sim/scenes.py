@@ -281,6 +281,11 @@ class CupsHand(SimHand):
         self.data.eq_active[:] = 0     # no helper welds here: picks are physical
         mujoco.mj_forward(self.model, self.data)
 
+    def reset_scene(self) -> None:
+        """Everything back to the model's initial state: hand open, arm home, cups parked."""
+        self._reset_state()
+        self.select(next(iter(self.cups)) if self.held not in self.cups else self.held)
+
     # ----------------------------------------------------------------- the arm
     def arm_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """The wrist (palm frame) in the world: position [m] and rotation (3, 3): the arm's

@@ -126,6 +126,7 @@ class HandTaskEnv(gym.Env):
         self.grasp_lost = False
         self.grasp_message = ""
         self.episode = 0
+        self.identified = 0          # identifications so far (several per episode: cups)
         self._image: np.ndarray | None = None
         self._u = np.zeros(3)
 
@@ -180,22 +181,41 @@ class HandTaskEnv(gym.Env):
 
     # ------------------------------------------------------------------ gymnasium API
     def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        if self.hand is None:
+            self.hand = self._open_hand()
+        self.episode += 1
+        self._prepare_episode()
+        self._identify_grasp()
+        self._start_task()
+        return self._get_obs(), self._info()
+
+    def _motion_config(self):
+        """The motion model's settings for the filter (`vlr.motion.MotionConfig`); tasks
+        whose palm does not face up give gravity in the palm frame here (cups)."""
+        from vlr.motion import MotionConfig
+
+        return MotionConfig()
+
+    def _identify_grasp(self) -> None:
+        """Grasp and self-identify (Algorithm 1) with a fresh filter, then move the commands
+        to the task's centre: what `reset` does, and what a task that grasps several
+        objects per episode (cups) does for each. Bumps `identified` (the baseline refits
+        its Jacobian correction on a new identification)."""
         from vlr.filter import FilterConfig
         from vlr.identify import IdentifyConfig, identify
         from vlr.kinematics import HandModel
         from vlr.motion import ObjectParams
         from vlr.synthetic import SyntheticConfig, nominal_grasp
 
-        super().reset(seed=seed)
-        if self.hand is None:
-            self.hand = self._open_hand()
-        self.episode += 1
         filter_seed = int(self.np_random.integers(0, 2**31 - 1))
         model = HandModel.from_spec(self.hand.spec)
         obj = ObjectParams.from_spec(self.hand.object_spec)
+        motion = self._motion_config()
         self.moves = []
         self.filter_lost = self.grasp_lost = False
         self.grasp_message = ""
+        self.identified += 1
         box: dict[str, Any] = {}
 
         def observer():
@@ -207,11 +227,13 @@ class HandTaskEnv(gym.Env):
         # criterion holds earlier: the baseline fits its Jacobian correction to them.
         cfg = IdentifyConfig(max_iterations=self.identify_iterations,
                              min_iterations=self.identify_iterations,
-                             filter=FilterConfig(n_particles=self.particles, seed=filter_seed))
+                             filter=FilterConfig(n_particles=self.particles, seed=filter_seed,
+                                                 motion=motion))
         try:
             self.identification = identify(self.hand, observer, model, obj,
-                                           nominal_grasp(model, obj, SyntheticConfig()), cfg,
-                                           watch=lambda pf, rec: box.update(pf=pf))
+                                           nominal_grasp(model, obj,
+                                                         SyntheticConfig(motion=motion)),
+                                           cfg, watch=lambda pf, rec: box.update(pf=pf))
         except FloatingPointError:
             # Every particle's solve failed (too few particles, or a prior that misses the
             # grasp): the episode goes on with the VLR lost, `filter_lost` says so.
@@ -233,8 +255,6 @@ class HandTaskEnv(gym.Env):
                 raise UserError(f"the task's centre command {np.round(self.center * 1e3, 3)}"
                                 " mm cannot be reached (the backend's command range; "
                                 "squeeze?)")
-        self._start_task()
-        return self._get_obs(), self._info()
 
     def step(self, action):
         a = np.clip(np.asarray(action, dtype=float).reshape(3), -self.max_step, self.max_step)
@@ -314,6 +334,9 @@ class HandTaskEnv(gym.Env):
         return VLRBaseline(self, **changes)
 
     # ------------------------------------------------------------------ for subclasses
+    def _prepare_episode(self) -> None:
+        """Set the scene up before the grasp (cups: arrange the table, move the arm)."""
+
     def _start_task(self) -> None:
         raise NotImplementedError
 

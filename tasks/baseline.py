@@ -60,7 +60,7 @@ class VLRBaseline:
         deltas, motions = self._pairs(env.moves)
         self.controller.fit(deltas, motions, jac)
         self._seen = len(env.moves)
-        self._episode = env.episode
+        self._episode = env.identified
 
     @staticmethod
     def _pairs(moves) -> tuple[np.ndarray, np.ndarray]:
@@ -75,7 +75,7 @@ class VLRBaseline:
 
     def __call__(self, observation: Any = None) -> np.ndarray:
         env = self.env
-        if self._episode != env.episode:
+        if self._episode != env.identified:   # a new episode, or a new grasp (cups)
             self._new_episode()
         else:
             # Learn from the moves made since the last call (the camera's view of them).
