@@ -55,6 +55,7 @@ class GapSettings:
         drift_actions: actions predicted open loop for the drift (the first ones).
         action_range: |tendon change| range [m]; band: commands stay this close to the grasp.
         rolling_substeps: solves per action with rolling (`MotionConfig.rolling_substeps`).
+        spin_stiffness: the pads' torsional stiffness [N m/rad] (`MotionConfig`).
     """
 
     object: str = "apple"
@@ -64,13 +65,16 @@ class GapSettings:
     drift_actions: int = 15
     action_range: tuple[float, float] = (0.2e-3, 0.4e-3)
     band: float = 0.4e-3
-    rolling_substeps: int = 1
+    rolling_substeps: int = MotionConfig.rolling_substeps
+    spin_stiffness: float = MotionConfig.spin_stiffness
 
     def __post_init__(self) -> None:
         if not isinstance(self.actions, int) or self.actions < 1:
             raise UserError(f"actions {self.actions!r} must be an integer >= 1")
         if not isinstance(self.drift_actions, int) or self.drift_actions < 1:
             raise UserError(f"drift actions {self.drift_actions!r} must be an integer >= 1")
+        if not (np.isfinite(self.spin_stiffness) and self.spin_stiffness >= 0):
+            raise UserError(f"spin stiffness {self.spin_stiffness!r} N m/rad must be >= 0")
         if not isinstance(self.rolling_substeps, int) or self.rolling_substeps < 1:
             raise UserError(f"rolling substeps {self.rolling_substeps!r} must be an integer "
                             ">= 1")
@@ -151,7 +155,8 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings) -
     """Per-action, static and drift gap of the motion model with `terms` (module docstring)."""
     model = HandModel.from_spec(rec.hand_spec)
     obj = ObjectParams.from_spec(rec.object_spec)
-    cfg = MotionConfig(terms=terms, rolling_substeps=settings.rolling_substeps)
+    cfg = MotionConfig(terms=terms, rolling_substeps=settings.rolling_substeps,
+                       spin_stiffness=settings.spin_stiffness)
     motion = MotionModel(model, obj, cfg)
     # The static settle may travel further than an action may (the model's own equilibrium).
     settle = replace(cfg, jump_theta=1.0, jump_pos=0.05, max_iter=200)
@@ -242,6 +247,7 @@ def gap_report(settings: GapSettings,
         "object": settings.object, "hand": settings.hand, "seed": settings.seed,
         "actions": len(rec.commands) - 1, "grasp_lost_at": rec.dropped_at,
         "rolling_substeps": settings.rolling_substeps,
+        "spin_stiffness": settings.spin_stiffness,
         "true_motion": {"position_mm_mean": float(np.mean(true_p)),
                         "orientation_deg_mean": float(np.mean(true_r))},
         "ratio_position_mean": full["ratio_position_mean"],
@@ -282,8 +288,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--actions", type=int, default=30, help="random actions (default 30)")
     p.add_argument("--drift-actions", type=int, default=15,
                    help="actions predicted open loop for the drift (default 15)")
-    p.add_argument("--substeps", type=int, default=1,
-                   help="solves per action with rolling contacts (default 1)")
+    p.add_argument("--substeps", type=int, default=MotionConfig.rolling_substeps,
+                   help="solves per action with rolling contacts (default "
+                   f"{MotionConfig.rolling_substeps})")
+    p.add_argument("--spin-stiffness", type=float, default=MotionConfig.spin_stiffness,
+                   help="the pads' torsional stiffness with rolling [N m/rad] (default "
+                   f"{MotionConfig.spin_stiffness})")
     p.add_argument("--json", help="write the report (per object, per model rung) as JSON")
     p.set_defaults(func=run)
 
@@ -303,7 +313,8 @@ def run(args: argparse.Namespace) -> int:
     for name in names:
         settings = GapSettings(object=name, hand=args.hand, seed=args.seed,
                                actions=args.actions, drift_actions=args.drift_actions,
-                               rolling_substeps=args.substeps)
+                               rolling_substeps=args.substeps,
+                               spin_stiffness=args.spin_stiffness)
         rep = gap_report(settings)
         print(format_report(rep) + "\n", flush=True)
         reports.append(rep)

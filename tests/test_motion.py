@@ -2,6 +2,7 @@
 tendon slack, invalid solves."""
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -20,6 +21,9 @@ from vlr.spec import load_hand
 from vlr.surface import LocalSurface
 
 OBJ = ObjectParams(mass=0.12, com=(0.0, 0.0, 0.03))
+# The pinned-contact model (Eq. 8 as a penalty), without rolling.
+PIN = MotionConfig()
+ROLL = MotionConfig().with_rolling()
 THETA0 = (-0.3, 1.2)
 
 
@@ -49,7 +53,7 @@ def grasp(model: HandModel, n: int = 1, tension: float = 5.0, theta=THETA0,
 
 
 def test_gradient_and_hessian_match_reference(modelo):
-    mm, st, u0 = grasp(modelo)
+    mm, st, u0 = grasp(modelo, config=PIN)
     rng = np.random.default_rng(1)
     st.theta += rng.normal(0, 0.02, st.theta.shape)
     st.rot[0] = st.rot[0] @ rotvec_to_matrix(rng.normal(0, 0.02, 3))
@@ -76,7 +80,7 @@ def test_rolling_gradient_and_hessian_match_reference(modelo, surface):
     """The rolling term (pad sphere on the object's local sphere, no tangential slip of the
     previous contacts) against finite differences of its NumPy reference."""
     obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=surface)
-    cfg = MotionConfig(terms=MotionConfig().terms + ("rolling",))
+    cfg = ROLL
     mm0, st, u0 = grasp(modelo)
     mm = MotionModel(modelo, obj, cfg)
     roll = mm.rolling_frames(st)[0]
@@ -105,7 +109,7 @@ def test_rolling_gradient_and_hessian_match_reference(modelo, surface):
 
 def test_equilibrium_is_stationary_and_matches_scipy(modelo):
     # A soft contact penalty keeps the plain reference minimiser well conditioned.
-    cfg = MotionConfig(contact_stiffness=1e4)
+    cfg = MotionConfig(terms=PIN.terms, contact_stiffness=1e4)
     mm, st, u0 = grasp(modelo, n=3, config=cfg)
     rng = np.random.default_rng(2)
     u = u0 + rng.uniform(-3e-4, 3e-4, (3,))
@@ -167,9 +171,35 @@ def test_three_joint_two_finger_pinch():
                link_coms=((0, 0, 0.02), (0, 0, 0.015), (0, 0, 0.012)))
     model = HandModel.from_chains(("a", "b"), (ch, ch), [[0, -0.03, 0.01], [0, 0.03, 0.01]],
                                   [math.pi / 2, -math.pi / 2], 2e4)
-    mm, st, u0 = grasp(model, n=2, theta=(0.1, 0.4, 0.4))
+    mm, st, u0 = grasp(model, n=2, theta=(0.1, 0.4, 0.4), config=PIN)
     _, g, _ = mm.evaluate(st, 0, u0)
     assert np.abs(g).max() < 1e-6
     status, _ = mm.solve(st, u0 + np.array([2e-4, -2e-4]))
     assert np.all(status == 0)
     assert np.all(np.isfinite(st.theta))
+
+
+def test_rolling_spin_gradient_matches_reference(modelo):
+    """The pad's torsional stiffness (spin about the contact normal): exact energy and
+    gradient (its Hessian is Gauss-Newton, so only the solver's speed depends on it)."""
+    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
+    cfg = replace(ROLL, spin_stiffness=0.05)
+    _, st, u0 = grasp(modelo)
+    mm = MotionModel(modelo, obj, cfg)
+    roll = mm.rolling_frames(st)[0]
+    rng = np.random.default_rng(4)
+    st.theta += rng.normal(0, 0.03, st.theta.shape)
+    st.rot[0] = st.rot[0] @ rotvec_to_matrix(rng.normal(0, 0.05, 3))
+
+    def f(x):
+        return reference_energy(mm, st, 0, u0, st.theta[0] + x[:6].reshape(3, 2),
+                                st.pos[0] + x[6:9], st.rot[0] @ rotvec_to_matrix(x[9:]),
+                                roll)
+
+    e, g, _ = mm.evaluate(st, 0, u0, roll)
+    assert e == pytest.approx(f(np.zeros(12)), rel=1e-10)
+    assert e > MotionModel(modelo, obj, ROLL).evaluate(st, 0, u0, roll)[0]
+    h = 1e-7
+    eye = np.eye(12)
+    g_num = np.array([(f(h * eye[i]) - f(-h * eye[i])) / (2 * h) for i in range(12)])
+    np.testing.assert_allclose(g, g_num, atol=1e-5 * np.abs(g).max() + 1e-6)

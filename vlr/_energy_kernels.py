@@ -26,9 +26,13 @@ N_TERMS = 7
 OK, NONFINITE, NO_CONVERGENCE, JUMP, INACTIVE = 0, 1, 2, 3, 4
 
 # Indices into the float parameter vector `prm`.
-P_KC, P_KLIM, P_TOL_TH, P_TOL_P, P_MAX_DTH, P_MAX_DP, P_JUMP_TH, P_JUMP_P, P_MU0, P_RHO = \
-    range(10)
-N_PRM = 10
+(P_KC, P_KLIM, P_TOL_TH, P_TOL_P, P_MAX_DTH, P_MAX_DP, P_JUMP_TH, P_JUMP_P, P_MU0, P_RHO,
+ P_KSPIN) = range(11)
+N_PRM = 11
+# Layout of a rolling frame (one per contact): local centre of curvature in O (3), contact
+# normal in the palm frame (3), the finger's summed joint angles (1) and the object rotation
+# R_PO (9, row-major) at the start of the solve.
+RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, N_RL = 0, 3, 6, 7, 16
 
 
 @njit(cache=True)
@@ -113,6 +117,58 @@ def _pair(i, k_n, px, py, pz, ax, ay, az, gam, Gam, rb, R, qy, qz, jac, M, lam, 
             if b == c:
                 geo -= la
             C[3 + b, 3 + c] += mgm - geo
+
+
+@njit(cache=True)
+def _spin(i, k_n, th, rl, R, rb, ks, vk, gA, A, B, gC, C):
+    """Spin of the object relative to finger i's distal link about the contact normal N,
+    since the start of the solve, as an elastic penalty 1/2 k_s s^2 (a pad's torsional
+    stiffness; 0 = free spin). s = N . (omega_O - omega_D): omega_O = vee(sym(R R0^T)),
+    omega_D = -(sum theta - sum theta_0) x_F. Exact gradient, Gauss-Newton Hessian."""
+    nx, ny, nz = rl[i, RL_NORMAL], rl[i, RL_NORMAL + 1], rl[i, RL_NORMAL + 2]
+    # W = R R0^T
+    W = vk[3:6]
+    for a in range(3):
+        for b in range(3):
+            W[a, b] = (R[a, 0] * rl[i, RL_ROT + 3 * b] + R[a, 1] * rl[i, RL_ROT + 3 * b + 1]
+                       + R[a, 2] * rl[i, RL_ROT + 3 * b + 2])
+    om0 = 0.5 * (W[2, 1] - W[1, 2])
+    om1 = 0.5 * (W[0, 2] - W[2, 0])
+    om2 = 0.5 * (W[1, 0] - W[0, 1])
+    phi = 0.0
+    for k in range(k_n):
+        phi += th[i, k]
+    cx = nx * rb[0, 0] + ny * rb[1, 0] + nz * rb[2, 0]
+    s = nx * om0 + ny * om1 + nz * om2 + (phi - rl[i, RL_PHI]) * cx
+    # d omega / d w_b = vee(sym(R [e_b]x R0^T)); its projection on N -> jw[b]
+    jw = vk[2]
+    for b in range(3):
+        # R [e_b]x: column c of [e_b]x is e_b x e_c
+        Q = vk[3:6]  # scratch: R [e_b]x R0^T (W is no longer needed)
+        for a in range(3):
+            for c in range(3):
+                t = 0.0
+                for d in range(3):
+                    # ([e_b]x)[d, f] = -eps(d, f, b): nonzero for d, f != b
+                    for f in range(3):
+                        if d == f or d == b or f == b:
+                            continue
+                        sgn = 1.0 if (d - f) % 3 == 1 else -1.0  # -eps(d, f, b)
+                        t += R[a, d] * sgn * rl[i, RL_ROT + 3 * c + f]
+                Q[a, c] = t
+        jw[b] = 0.5 * (nx * (Q[2, 1] - Q[1, 2]) + ny * (Q[0, 2] - Q[2, 0])
+                       + nz * (Q[1, 0] - Q[0, 1]))
+    for k in range(k_n):
+        gA[i, k] += ks * s * cx
+        for m in range(k_n):
+            A[i, k, m] += ks * cx * cx
+        for b in range(3):
+            B[i, k, 3 + b] += ks * cx * jw[b]
+    for b in range(3):
+        gC[3 + b] += ks * s * jw[b]
+        for c in range(3):
+            C[3 + b, 3 + c] += ks * jw[b] * jw[c]
+    return 0.5 * ks * s * s
 
 
 @njit(cache=True)
@@ -244,6 +300,8 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                                     + (reach / dist) * dv[a] * dv[b])
             _pair(i, k_n, px, py, pz, ox, oy, oz, gam, G, rb, R, qy, qz, jac, M,
                   vk[2], vk[0], gA, A, B, gC, C)
+            if prm[P_KSPIN] > 0.0:
+                e += _spin(i, k_n, th, rl, R, rb, prm[P_KSPIN], vk, gA, A, B, gC, C)
         # Eq. 8 as a stiff penalty: the contact (fixed in D) stays at its anchor (fixed in O).
         elif flags[CONTACTS] != 0:
             ax, ay, az = anc[i, 0], anc[i, 1], anc[i, 2]

@@ -374,10 +374,11 @@ class ParticleFilter:
         `observation` None (camera dropped the frame) makes it a prediction-only step."""
         if self.state is None:
             raise RuntimeError("initialize() first")
+        previous = self.command
         self.command = np.asarray(command, dtype=float).copy()
         self.iteration += 1
         t0 = time.perf_counter()
-        _, iters = self.motion.solve(self.state, self.command)
+        _, iters = self.motion.solve(self.state, self.command, u_from=previous)
         # Median Newton iterations of the action solve and of the post-jitter settle
         # (`vlr bench` reports them: they are what a filter iteration costs).
         self.newton_iterations = {"action": float(np.median(iters))}

@@ -90,12 +90,16 @@ class MotionConfig:
         mu0: initial Levenberg-Marquardt damping (relative to the Hessian diagonal).
         rolling_substeps: with "rolling" in `terms`, a command change given its start
             (`MotionModel.solve(..., u_from=)`) is split into this many solves, the contacts
-            rolled after each: the pinned contact within a solve is exact only to first order.
+            rolled after each: within a solve the previous contact points are held, which
+            is exact only while the pad turns little (measured by `vlr gap`).
+        spin_stiffness: with rolling, the pad's torsional stiffness about the contact
+            normal [N m/rad]; 0 lets the object spin freely on the pads.
     """
 
     terms: tuple[str, ...] = ("springs", "tendon", "limits", "link_gravity",
                               "object_gravity", "contacts")
-    rolling_substeps: int = 1
+    rolling_substeps: int = 4
+    spin_stiffness: float = 0.0
     contact_stiffness: float = 1e6
     limit_stiffness: float = 100.0
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
@@ -116,6 +120,8 @@ class MotionConfig:
         if "rolling" in self.terms and "contacts" not in self.terms:
             raise ValueError("the 'rolling' term moves the contacts of the 'contacts' term: "
                              "it needs 'contacts' too")
+        if not (np.isfinite(self.spin_stiffness) and self.spin_stiffness >= 0):
+            raise ValueError(f"spin_stiffness {self.spin_stiffness!r} N m/rad must be >= 0")
         if not (isinstance(self.rolling_substeps, int) and self.rolling_substeps >= 1):
             raise ValueError(f"rolling_substeps {self.rolling_substeps!r} must be an "
                              "integer >= 1")
@@ -123,6 +129,12 @@ class MotionConfig:
     @property
     def rolling(self) -> bool:
         return "rolling" in self.terms
+
+    def with_rolling(self, on: bool = True) -> MotionConfig:
+        """This configuration with the rolling term switched on (or off)."""
+        from dataclasses import replace
+        terms = tuple(t for t in self.terms if t != "rolling")
+        return replace(self, terms=terms + (("rolling",) if on else ()))
 
     def flags(self) -> np.ndarray:
         out = np.zeros(kern.N_TERMS, dtype=np.int64)
@@ -141,6 +153,7 @@ class MotionConfig:
         prm[kern.P_JUMP_TH] = self.jump_theta
         prm[kern.P_JUMP_P] = self.jump_pos
         prm[kern.P_MU0] = self.mu0
+        prm[kern.P_KSPIN] = self.spin_stiffness
         return prm
 
 
@@ -263,7 +276,7 @@ class MotionModel:
             np.asarray(self.config.gravity, dtype=float))
         self._flags = self.config.flags()
         self._prm = self._params(self.config)
-        self._no_roll = np.zeros((1, model.n_fingers, 6))
+        self._no_roll = np.zeros((1, model.n_fingers, kern.N_RL))
 
     def _params(self, cfg: MotionConfig) -> np.ndarray:
         prm = cfg.params()
@@ -271,13 +284,17 @@ class MotionModel:
         return prm
 
     def rolling_frames(self, state: ParticleState) -> np.ndarray:
-        """(P, N, 6) what the rolling term holds fixed during a solve: each contact's local
-        centre of curvature in O, a - rho m, and its normal in the palm frame, R m (m: the
-        object's outward normal at the contact, in O)."""
+        """(P, N, 16) what the rolling term holds fixed during a solve: each contact's local
+        centre of curvature in O, a - rho m, its normal in the palm frame, R m (m: the
+        object's outward normal at the contact, in O), the finger's summed joint angles and
+        the object's rotation (for the spin term)."""
         m = surface_normals(self.model, state.theta, state.normals, state.rot)
-        out = np.empty(m.shape[:2] + (6,))
-        out[..., :3] = state.anchors - self.obj.surface.kernel_radius * m
-        out[..., 3:] = np.einsum("pab,pnb->pna", state.rot, m)
+        out = np.empty(m.shape[:2] + (kern.N_RL,))
+        out[..., kern.RL_CENTRE:kern.RL_CENTRE + 3] = (
+            state.anchors - self.obj.surface.kernel_radius * m)
+        out[..., kern.RL_NORMAL:kern.RL_NORMAL + 3] = np.einsum("pab,pnb->pna", state.rot, m)
+        out[..., kern.RL_PHI] = state.theta.sum(axis=-1)
+        out[..., kern.RL_ROT:] = state.rot.reshape(-1, 1, 9)
         return out
 
     def solve(self, state: ParticleState, u: np.ndarray, config: MotionConfig | None = None,
@@ -342,7 +359,7 @@ class MotionModel:
         coordinates (theta, dp, dw). `roll`: the (N, 6) rolling frames (`rolling_frames`),
         needed with the rolling term. For tests and diagnostics."""
         if roll is None:
-            roll = self._no_roll[0]
+            roll = self.rolling_frames(state)[q] if self.config.rolling else self._no_roll[0]
         nf, nk = self.model.n_fingers, self.model.n_joints
         gA, gC = np.empty((nf, nk)), np.empty(6)
         A, B, C = np.empty((nf, nk, nk)), np.empty((nf, nk, 6)), np.empty((6, 6))
@@ -375,6 +392,8 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
     (Eq. 6, 7 compliant, 8 penalty or rolling with the (N, 6) frames `roll`, limits,
     gravity). The independent reference the vectorised kernel is tested against."""
     m, cfg, obj = motion.model, motion.config, motion.obj
+    if roll is None and cfg.rolling:
+        roll = motion.rolling_frames(state)[q]
     g = np.asarray(cfg.gravity, dtype=float)
     theta = np.asarray(theta, dtype=float)
     lim = m.limits
@@ -402,12 +421,18 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
     if "contacts" in cfg.terms and "rolling" in cfg.terms:
         c = contact_points(m, theta, state.normals[q], state.segments[q])
         d = c - (pos + state.anchors[q] @ rot.T)
-        n = roll[:, 3:]
+        n = roll[:, 3:6]
         tangential = d - np.sum(d * n, axis=-1, keepdims=True) * n
         centre = contact_points(m, theta, np.zeros_like(state.normals[q]), state.segments[q])
         gap = np.linalg.norm(centre - (pos + roll[:, :3] @ rot.T), axis=-1) \
             - (obj.surface.kernel_radius + m.pad_radius)
         e += 0.5 * cfg.contact_stiffness * (np.sum(tangential**2) + np.sum(gap**2))
+        if cfg.spin_stiffness > 0:
+            w = rot @ roll[0, 7:16].reshape(3, 3).T
+            omega = 0.5 * np.array([w[2, 1] - w[1, 2], w[0, 2] - w[2, 0], w[1, 0] - w[0, 1]])
+            spin = n @ omega + (theta.sum(axis=-1) - roll[:, 6]) * np.einsum(
+                "na,na->n", n, m.base_rot[:, :, 0])
+            e += 0.5 * cfg.spin_stiffness * np.sum(spin**2)
     elif "contacts" in cfg.terms:
         c = contact_points(m, theta, state.normals[q], state.segments[q])
         target = pos + state.anchors[q] @ rot.T

@@ -107,13 +107,22 @@ def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
         normals_before: (P, N, 3) the object's surface normals at the contacts in O before
             that solve (`surface_normals`): material to the object, so the solve left them.
     Returns:
-        (normals, anchors): the new pad normals in D and contact points in O. The pad's
-        material contact point equals the new anchor, so the grasp penalty (Eq. 8) stays
-        satisfied and the POM pose is unchanged.
+        (normals, anchors): the new pad normals in D and contact points in O. The POM pose
+        is unchanged, and so are the rolling term's residuals (the pad-to-surface gap and the
+        tangential offset of the contact points): they carry the contact forces, so the
+        state stays at equilibrium; zeroing them would drop the grasp's squeeze and friction.
     """
     radius = model.pad_radius[None, :, None]
     centre_palm = contact_points(model, theta, np.zeros_like(normals), segments)
     centre = np.einsum("pba,pnb->pna", rot, centre_palm - pos[:, None, :])
+    contact = np.einsum("pba,pnb->pna", rot,
+                        contact_points(model, theta, normals, segments) - pos[:, None, :])
+    # The residuals as the motion model's rolling term sees them (its local sphere).
+    d = contact - anchors
+    tangential = d - np.sum(d * normals_before, axis=-1, keepdims=True) * normals_before
+    rho_k = surface.kernel_radius
+    gap = (np.linalg.norm(centre - (anchors - rho_k * normals_before), axis=-1, keepdims=True)
+           - (rho_k + radius))
     m = normals_before
     if surface.kind == "plane":
         out = m
@@ -133,7 +142,7 @@ def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
         else:
             d = centre - (anchors - rho * m)    # from the local centre of curvature
             out = d / np.linalg.norm(d, axis=-1, keepdims=True)
-    new_anchors = centre - radius * out
+    new_anchors = centre - (radius + gap) * out - tangential
     n_palm = -np.einsum("pab,pnb->pna", rot, out)
     new_normals = np.einsum("pnba,pnb->pna", _distal_rotations(model, theta), n_palm)
     return (np.ascontiguousarray(new_normals / np.linalg.norm(new_normals, axis=-1,

@@ -175,7 +175,7 @@ class SyntheticWorld:
         trial = self.state.copy()
         # The world is not limited to small moves: only a failed solve loses the grasp.
         cfg = replace(self.config.motion, max_iter=300, jump_theta=np.pi, jump_pos=1.0)
-        status, _ = self.motion.solve(trial, new, cfg)
+        status, _ = self.motion.solve(trial, new, cfg, u_from=self._commands)
         if status[0] != 0:
             raise RuntimeError(f"synthetic world lost the grasp (status {status[0]})")
         self.state = trial

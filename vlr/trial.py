@@ -55,6 +55,8 @@ class TrialSettings:
             generic guess (vlr.synthetic.SyntheticConfig.grasp_theta). The prior is the nominal
             hand's equilibrium from there (vlr.synthetic.nominal_grasp).
         prior_spread_deg: prior std of the joint angles about the nominal grasp [deg].
+        rolling: rolling contacts in the filter's motion model (vlr.surface; measured by
+            `vlr gap`, docs/RESULTS.md).
         config: hardware only: the hardware YAML file.
     """
 
@@ -72,6 +74,7 @@ class TrialSettings:
     sigma_rot_deg: float | None = None
     nominal_theta_deg: tuple[float, ...] | None = None
     prior_spread_deg: float = 3.0
+    rolling: bool = False
     config: str | None = None
 
     def __post_init__(self) -> None:
@@ -125,6 +128,8 @@ class TrialSettings:
             v = getattr(self, name)
             if not (is_real(v) or (v is None and name != "prior_spread_deg")):
                 raise bad(name, "a number")
+        if not isinstance(self.rolling, bool):
+            raise bad("rolling", "true or false")
         if isinstance(self.unknowns, str):  # one unknown, not a list of its letters
             object.__setattr__(self, "unknowns", (self.unknowns,))
         if (not isinstance(self.unknowns, list | tuple)
@@ -274,7 +279,13 @@ def identify_config(settings: TrialSettings, model):
 
     check_unknowns(settings, model)
     sp, sr = settings.sigma
+    from vlr.motion import MotionConfig
+
+    # Rolling contacts halve the sim's per-action gap (vlr gap), but in closed loop they
+    # are not yet a clear win and cost 2-3x the time (docs/RESULTS.md 3): off by default.
+    rolling = settings.rolling
     fcfg = FilterConfig(n_particles=settings.particles, seed=settings.seed,
+                        motion=MotionConfig().with_rolling(rolling),
                         unknowns=settings.unknowns,
                         theta_spread=float(np.radians(settings.prior_spread_deg)),
                         observation=ObservationModel(sigma_pos=sp * 1e-3,

@@ -44,6 +44,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="your guess of the grasp's joint angles, one per joint (every finger)")
     p.add_argument("--prior-spread-deg", type=float, default=3.0,
                    help="prior std of the joint angles about the nominal grasp [deg]")
+    p.add_argument("--rolling", action="store_true",
+                   help="rolling contacts in the filter's motion model (vlr gap measures "
+                   "them; off by default, docs/RESULTS.md)")
     p.add_argument("--config", help="hardware backend: the hardware YAML file")
     p.add_argument("--out", default="runs/identify", help="output folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -111,7 +114,8 @@ def run(args: argparse.Namespace) -> int:
         true_stiffness=dict(args.true_stiffness), max_iterations=args.max_iterations,
         min_iterations=args.min_iterations, sigma_pos_mm=args.sigma_pos_mm,
         sigma_rot_deg=args.sigma_rot_deg, config=args.config,
-        nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg)
+        nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg,
+        rolling=args.rolling)
     w = open_world(settings)
     hand = w.hand
     try:

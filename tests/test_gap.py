@@ -1,0 +1,62 @@
+"""`vlr gap` (issue 5): the model-world gap from the simulator's true state, as a regression
+guard. One short recording on the apple (12 actions, seed 0), every model rung measured on it.
+
+Measured at 30 actions, seed 0 (docs/RESULTS.md 3): with all terms and rolling (4 substeps)
+the per-action ratio is 0.077 (position) / 0.197 (orientation) on the apple; the pinned
+contacts with weights 0.30 / 0.99; the static gap 0.14-0.16 mm. At 12 actions: 0.144 / 0.279
+with rolling, 0.253 / 0.861 pinned. The bounds sit above the 12-action figures with a margin
+for platform round-off, and below the pinned model's, so losing rolling (or a weight) fails
+them.
+"""
+
+import json
+
+import pytest
+
+from sim.gap import LADDER, GapSettings, gap_report
+from vlr.cli import main
+from vlr.errors import UserError
+
+
+@pytest.fixture(scope="module")
+def apple_gap() -> dict:
+    return gap_report(GapSettings(object="apple", seed=0, actions=12, drift_actions=12))
+
+
+def test_rolling_closes_most_of_the_apple_gap(apple_gap):
+    rungs = {c["name"]: c for c in apple_gap["configs"]}
+    assert [c["name"] for c in apple_gap["configs"]] == [name for name, _ in LADDER]
+    full, pinned = rungs["+ rolling"], rungs["+ object weight"]
+    assert full["failed_solves"] == 0
+    assert full["ratio_position_mean"] < 0.18
+    assert full["ratio_orientation_mean"] < 0.35
+    assert full["ratio_position_mean"] < 0.7 * pinned["ratio_position_mean"]
+    assert full["ratio_orientation_mean"] < 0.5 * pinned["ratio_orientation_mean"]
+    assert full["drift_ratio"] < 0.05
+    # The weights remove the static offset (METHOD.md 8.2: 0.3-0.6 degrees).
+    assert full["static"]["position_mm_mean"] < 0.5
+    assert rungs["fixed contacts, no weights"]["static"]["position_mm_mean"] > 1.0
+    assert apple_gap["ratio_position_mean"] == full["ratio_position_mean"]
+
+
+def test_gap_cli_writes_json(tmp_path, capsys):
+    out = tmp_path / "gap.json"
+    assert main(["gap", "--object", "gelatin_box", "--actions", "3", "--drift-actions", "3",
+                 "--json", str(out)]) == 0
+    rep = json.loads(out.read_text())
+    assert rep["object"] == "gelatin_box" and rep["actions"] == 3
+    for key in ("ratio_position_mean", "ratio_orientation_mean", "drift_ratio"):
+        assert rep[key] >= 0
+    assert "+ rolling" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("kw", [dict(actions=0), dict(rolling_substeps=0),
+                                dict(action_range=(0.0, 3e-3)), dict(spin_stiffness=-1.0)])
+def test_bad_gap_settings_are_named(kw):
+    with pytest.raises(UserError, match=next(iter(kw)).split("_")[0]):
+        GapSettings(**kw)
+
+
+def test_gap_cli_bad_json_folder(tmp_path, capsys):
+    assert main(["gap", "--json", str(tmp_path / "missing" / "g.json")]) == 2
+    assert "folder does not exist" in capsys.readouterr().err
