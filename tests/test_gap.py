@@ -2,7 +2,7 @@
 guard. One short recording on the apple (12 actions, seed 0), every model rung measured on it.
 
 Measured at 30 actions, seed 0 (docs/RESULTS.md 3): with all terms and rolling (4 substeps)
-the per-action ratio is 0.077 (position) / 0.197 (orientation) on the apple; the pinned
+the per-action ratio is 0.120 (position) / 0.247 (orientation) on the apple; the pinned
 contacts with weights 0.30 / 0.99; the static gap 0.14-0.16 mm. At 12 actions: 0.144 / 0.279
 with rolling, 0.253 / 0.861 pinned. The bounds sit above the 12-action figures with a margin
 for platform round-off, and below the pinned model's, so losing rolling (or a weight) fails
