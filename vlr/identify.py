@@ -21,6 +21,7 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from vlr.active import ActiveExploration, choose_action
 from vlr.explore import ExplorationRange, random_action
 from vlr.filter import FilterConfig, IterationRecord, ParticleFilter
 from vlr.hand import GraspError
@@ -53,6 +54,9 @@ class IdentifyConfig:
         stop_on_convergence: stop once the 95% interval criterion holds (METHOD.md 3).
         filter: particle-filter settings.
         action_seed: seed of the action Generator (None: the filter's seed + 1).
+        exploration: "random" (the paper) or "active" (`vlr.active`: the candidate whose
+            predicted POM poses disagree most across the particles).
+        active: settings of the active choice.
         first_observation_frames: frames to wait for the first tag detection after the
             grasp before giving up with a GraspError.
     """
@@ -65,6 +69,13 @@ class IdentifyConfig:
     stop_on_convergence: bool = True
     filter: FilterConfig = field(default_factory=FilterConfig)
     action_seed: int | None = None
+    exploration: str = "random"
+    active: ActiveExploration = field(default_factory=ActiveExploration)
+
+    def __post_init__(self) -> None:
+        if self.exploration not in ("random", "active"):
+            raise ValueError(f"exploration {self.exploration!r}: expected 'random' or "
+                             "'active'")
 
 
 @dataclass(frozen=True)
@@ -199,7 +210,10 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
         if pf.converged and cfg.stop_on_convergence and it >= cfg.min_iterations:
             break
         it += 1
-        delta = random_action(action_rng, u, center, explore)
+        if cfg.exploration == "active":
+            delta = choose_action(pf, action_rng, u, center, explore, cfg.active)
+        else:
+            delta = random_action(action_rng, u, center, explore)
         u = _commands(world.apply(delta))
         obs = observer()
         t0 = time.perf_counter()

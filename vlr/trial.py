@@ -57,6 +57,7 @@ class TrialSettings:
         prior_spread_deg: prior std of the joint angles about the nominal grasp [deg].
         rolling: rolling contacts in the filter's motion model (vlr.surface; measured by
             `vlr gap`, docs/RESULTS.md).
+        exploration: "random" actions (the paper) or "active" (vlr.active).
         config: hardware only: the hardware YAML file.
     """
 
@@ -75,6 +76,7 @@ class TrialSettings:
     nominal_theta_deg: tuple[float, ...] | None = None
     prior_spread_deg: float = 3.0
     rolling: bool = False
+    exploration: str = "random"
     config: str | None = None
 
     def __post_init__(self) -> None:
@@ -130,6 +132,8 @@ class TrialSettings:
                 raise bad(name, "a number")
         if not isinstance(self.rolling, bool):
             raise bad("rolling", "true or false")
+        if self.exploration not in ("random", "active"):
+            raise UserError(f"exploration {self.exploration!r}: expected random or active")
         if isinstance(self.unknowns, str):  # one unknown, not a list of its letters
             object.__setattr__(self, "unknowns", (self.unknowns,))
         if (not isinstance(self.unknowns, list | tuple)
@@ -291,7 +295,8 @@ def identify_config(settings: TrialSettings, model):
                         observation=ObservationModel(sigma_pos=sp * 1e-3,
                                                      sigma_rot=float(np.radians(sr))))
     return IdentifyConfig(max_iterations=settings.max_iterations,
-                          min_iterations=settings.min_iterations, filter=fcfg)
+                          min_iterations=settings.min_iterations, filter=fcfg,
+                          exploration=settings.exploration)
 
 
 def run_trial(settings: TrialSettings, out: Path | None = None,

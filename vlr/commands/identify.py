@@ -47,6 +47,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rolling", action="store_true",
                    help="rolling contacts in the filter's motion model (vlr gap measures "
                    "them; off by default, docs/RESULTS.md)")
+    p.add_argument("--exploration", choices=("random", "active"), default="random",
+                   help="random actions (the paper) or active: the candidate whose predicted "
+                   "POM poses disagree most across the particles")
     p.add_argument("--config", help="hardware backend: the hardware YAML file")
     p.add_argument("--out", default="runs/identify", help="output folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -115,7 +118,7 @@ def run(args: argparse.Namespace) -> int:
         min_iterations=args.min_iterations, sigma_pos_mm=args.sigma_pos_mm,
         sigma_rot_deg=args.sigma_rot_deg, config=args.config,
         nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg,
-        rolling=args.rolling)
+        rolling=args.rolling, exploration=args.exploration)
     w = open_world(settings)
     hand = w.hand
     try:
