@@ -58,12 +58,14 @@ def _finger_chain(th, seg, nrm, pcx, pcy, prad, sphi, cphi, qy, qz):
 
 
 @njit(cache=True)
-def _pair(i, k_n, px, py, pz, ax, ay, az, gam, Gam, rb, R, qy, qz, jac, M, lam, gt,
+def _pair(i, k_n, px, py, pz, ax, ay, az, gam, Gam, iso, rb, R, qy, qz, jac, M, lam, gt,
           gA, A, B, gC, C):
     """Gradient and Hessian of phi(v), v = x(theta) - (p + R a): x a point fixed in finger i's
     distal frame ((px, py, pz) in its finger frame F), a a point fixed in O (ax, ay, az).
     gam = dphi/dv (3,), Gam = d2phi/dv2 (3, 3), both in the palm frame; the caller adds phi.
-    grad = J^T gam; Hess = J^T Gam J + sum_a gam_a d2v_a (the geometric part)."""
+    grad = J^T gam; Hess = J^T Gam J + sum_a gam_a d2v_a (the geometric part).
+    iso > 0 says Gam = iso I (the pinned contact, the default hot path): Gam is not read and
+    its matrix products are skipped."""
     for j in range(k_n):
         dy = py - qy[j]
         dz = pz - qz[j]
@@ -78,7 +80,11 @@ def _pair(i, k_n, px, py, pz, ax, ay, az, gam, Gam, rb, R, qy, qz, jac, M, lam, 
         gA[i, j] += jac[j, 0] * gam[0] + jac[j, 1] * gam[1] + jac[j, 2] * gam[2]
         # gt = Gam jac_j
         for a in range(3):
-            gt[a] = Gam[a, 0] * jac[j, 0] + Gam[a, 1] * jac[j, 1] + Gam[a, 2] * jac[j, 2]
+            if iso > 0.0:
+                gt[a] = iso * jac[j, a]
+            else:
+                gt[a] = (Gam[a, 0] * jac[j, 0] + Gam[a, 1] * jac[j, 1]
+                         + Gam[a, 2] * jac[j, 2])
         for m in range(j, k_n):
             dy2 = py - qy[m]
             dz2 = pz - qz[m]
@@ -100,9 +106,14 @@ def _pair(i, k_n, px, py, pz, ax, ay, az, gam, Gam, rb, R, qy, qz, jac, M, lam, 
     la = lam[0] * ax + lam[1] * ay + lam[2] * az
     for b in range(3):
         for c in range(3):
-            C[b, c] += Gam[b, c]
-            # (Gam M)[b, c]
-            gm = Gam[b, 0] * M[0, c] + Gam[b, 1] * M[1, c] + Gam[b, 2] * M[2, c]
+            if iso > 0.0:
+                if b == c:
+                    C[b, c] += iso
+                gm = iso * M[b, c]
+            else:
+                C[b, c] += Gam[b, c]
+                # (Gam M)[b, c]
+                gm = Gam[b, 0] * M[0, c] + Gam[b, 1] * M[1, c] + Gam[b, 2] * M[2, c]
             C[b, 3 + c] -= gm
             C[3 + c, b] -= gm
     for b in range(3):
@@ -110,9 +121,12 @@ def _pair(i, k_n, px, py, pz, ax, ay, az, gam, Gam, rb, R, qy, qz, jac, M, lam, 
         for c in range(3):
             ac = ax if c == 0 else (ay if c == 1 else az)
             mgm = 0.0
-            for d in range(3):
-                mgm += M[d, b] * (Gam[d, 0] * M[0, c] + Gam[d, 1] * M[1, c]
-                                  + Gam[d, 2] * M[2, c])
+            if iso > 0.0:
+                mgm = iso * (M[0, b] * M[0, c] + M[1, b] * M[1, c] + M[2, b] * M[2, c])
+            else:
+                for d in range(3):
+                    mgm += M[d, b] * (Gam[d, 0] * M[0, c] + Gam[d, 1] * M[1, c]
+                                      + Gam[d, 2] * M[2, c])
             geo = 0.5 * (lam[b] * ac + ab * lam[c])
             if b == c:
                 geo -= la
@@ -272,7 +286,7 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                 gam[a] = kc * tv[a]
                 for b in range(3):
                     G[a, b] = kc * ((1.0 if a == b else 0.0) - nv[a] * nv[b])
-            _pair(i, k_n, cfx, cfy, cfz, ax, ay, az, gam, G, rb, R, qy, qz, jac, M,
+            _pair(i, k_n, cfx, cfy, cfz, ax, ay, az, gam, G, 0.0, rb, R, qy, qz, jac, M,
                   vk[2], vk[0], gA, A, B, gC, C)
             # Pad centre (fixed in D) to the local centre of curvature (fixed in O).
             s_last, c_last = sphi[k_n - 1], cphi[k_n - 1]
@@ -298,64 +312,23 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                 for b in range(3):
                     G[a, b] = kc * (sc * (1.0 if a == b else 0.0)
                                     + (reach / dist) * dv[a] * dv[b])
-            _pair(i, k_n, px, py, pz, ox, oy, oz, gam, G, rb, R, qy, qz, jac, M,
+            _pair(i, k_n, px, py, pz, ox, oy, oz, gam, G, 0.0, rb, R, qy, qz, jac, M,
                   vk[2], vk[0], gA, A, B, gC, C)
             if prm[P_KSPIN] > 0.0:
                 e += _spin(i, k_n, th, rl, R, rb, prm[P_KSPIN], vk, gA, A, B, gC, C)
         # Eq. 8 as a stiff penalty: the contact (fixed in D) stays at its anchor (fixed in O).
         elif flags[CONTACTS] != 0:
             ax, ay, az = anc[i, 0], anc[i, 1], anc[i, 2]
-            r = vk[0]
+            gam = vk[1]
+            rr = 0.0
             for a in range(3):
-                r[a] = (base_pos[i, a] + rb[a, 0] * cfx + rb[a, 1] * cfy + rb[a, 2] * cfz
-                        - p[a] - (R[a, 0] * ax + R[a, 1] * ay + R[a, 2] * az))
-            e += 0.5 * kc * (r[0] * r[0] + r[1] * r[1] + r[2] * r[2])
-            # jac[j] = d contact / d theta_j in the palm frame
-            for j in range(k_n):
-                dy = cfy - qy[j]
-                dz = cfz - qz[j]
-                for a in range(3):
-                    jac[j, a] = rb[a, 1] * dz - rb[a, 2] * dy
-            # M = R [a]x : d r / d w
-            for a in range(3):
-                M[a, 0] = R[a, 1] * az - R[a, 2] * ay
-                M[a, 1] = -R[a, 0] * az + R[a, 2] * ax
-                M[a, 2] = R[a, 0] * ay - R[a, 1] * ax
-            for j in range(k_n):
-                gA[i, j] += kc * (jac[j, 0] * r[0] + jac[j, 1] * r[1] + jac[j, 2] * r[2])
-                for m in range(j, k_n):
-                    dy2 = cfy - qy[m]
-                    dz2 = cfz - qz[m]
-                    # r . R_b (0, -dy', -dz'): the geometric (force x curvature) part
-                    geo = -(r[0] * (rb[0, 1] * dy2 + rb[0, 2] * dz2)
-                            + r[1] * (rb[1, 1] * dy2 + rb[1, 2] * dz2)
-                            + r[2] * (rb[2, 1] * dy2 + rb[2, 2] * dz2))
-                    h = kc * (jac[j, 0] * jac[m, 0] + jac[j, 1] * jac[m, 1]
-                              + jac[j, 2] * jac[m, 2] + geo)
-                    A[i, j, m] += h
-                    if m != j:
-                        A[i, m, j] += h
-                for b in range(3):
-                    B[i, j, b] -= kc * jac[j, b]
-                    B[i, j, 3 + b] += kc * (jac[j, 0] * M[0, b] + jac[j, 1] * M[1, b]
-                                            + jac[j, 2] * M[2, b])
-            lam = vk[1]
-            for b in range(3):
-                gC[b] -= kc * r[b]
-                gC[3 + b] += kc * (M[0, b] * r[0] + M[1, b] * r[1] + M[2, b] * r[2])
-                lam[b] = R[0, b] * r[0] + R[1, b] * r[1] + R[2, b] * r[2]
-            la = lam[0] * ax + lam[1] * ay + lam[2] * az
-            av = (ax, ay, az)
-            for b in range(3):
-                C[b, b] += kc
-                for c in range(3):
-                    C[b, 3 + c] -= kc * M[b, c]
-                    C[3 + c, b] -= kc * M[b, c]
-                    mtm = M[0, b] * M[0, c] + M[1, b] * M[1, c] + M[2, b] * M[2, c]
-                    geo = 0.5 * (lam[b] * av[c] + av[b] * lam[c])
-                    if b == c:
-                        geo -= la
-                    C[3 + b, 3 + c] += kc * (mtm - geo)
+                r_a = (base_pos[i, a] + rb[a, 0] * cfx + rb[a, 1] * cfy + rb[a, 2] * cfz
+                       - p[a] - (R[a, 0] * ax + R[a, 1] * ay + R[a, 2] * az))
+                rr += r_a * r_a
+                gam[a] = kc * r_a
+            e += 0.5 * kc * rr
+            _pair(i, k_n, cfx, cfy, cfz, ax, ay, az, gam, vk[3:6], kc, rb, R, qy, qz, jac, M,
+                  vk[2], vk[0], gA, A, B, gC, C)
     # Gravity potential of the object: -m g . (p + R com).
     if flags[OBJECT_GRAVITY] != 0:
         cx, cy, cz = ocom[0], ocom[1], ocom[2]

@@ -283,12 +283,15 @@ class MotionModel:
         prm[kern.P_RHO] = self.obj.surface.kernel_radius
         return prm
 
-    def rolling_frames(self, state: ParticleState) -> np.ndarray:
+    def rolling_frames(self, state: ParticleState,
+                       normals_o: np.ndarray | None = None) -> np.ndarray:
         """(P, N, 16) what the rolling term holds fixed during a solve: each contact's local
         centre of curvature in O, a - rho m, its normal in the palm frame, R m (m: the
         object's outward normal at the contact, in O), the finger's summed joint angles and
-        the object's rotation (for the spin term)."""
-        m = surface_normals(self.model, state.theta, state.normals, state.rot)
+        the object's rotation (for the spin term). `normals_o`: m if already computed
+        (`vlr.surface.surface_normals`)."""
+        m = (surface_normals(self.model, state.theta, state.normals, state.rot)
+             if normals_o is None else normals_o)
         out = np.empty(m.shape[:2] + (kern.N_RL,))
         out[..., kern.RL_CENTRE:kern.RL_CENTRE + 3] = (
             state.anchors - self.obj.surface.kernel_radius * m)
@@ -328,7 +331,7 @@ class MotionModel:
         for target in targets:
             before = surface_normals(self.model, state.theta, state.normals, state.rot) \
                 if cfg.rolling else None
-            roll = self.rolling_frames(state) if cfg.rolling else self._no_roll
+            roll = self.rolling_frames(state, before) if cfg.rolling else self._no_roll
             kern.solve_batch(state.theta, state.segments, state.normals, state.anchors,
                              roll, state.pos, state.rot, state.stiffness, state.tendon, target,
                              *self._shared, flags, prm, int(cfg.max_iter), state.valid,
