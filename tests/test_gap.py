@@ -45,8 +45,10 @@ def test_gap_cli_writes_json(tmp_path, capsys):
                  "--json", str(out)]) == 0
     rep = json.loads(out.read_text())
     assert rep["object"] == "gelatin_box" and rep["actions"] == 3
+    assert [c["name"] for c in rep["configs"]] == [name for name, _ in LADDER]
+    assert all(len(c["per_action"]) == 3 for c in rep["configs"])
     for key in ("ratio_position_mean", "ratio_orientation_mean", "drift_ratio"):
-        assert rep[key] >= 0
+        assert 0 < rep[key] < 1
     assert "+ rolling" in capsys.readouterr().out
 
 
