@@ -119,3 +119,20 @@ def test_filter_recovers_when_every_particle_fails():
     rec = pf.step(u, world.observe())
     assert pf.recoveries == 1
     assert pf.state.valid.mean() > 0.5 and np.isfinite(rec.ci_deg)
+
+
+def test_a_particle_at_the_truth_stays_there(modelo):
+    """The truth, planted as one particle, must come through an update exactly: resampling
+    keeps the first copy of each parent un-jittered, and re-anchoring keeps its grasp force
+    (a particle at the truth used to move 0.5 degrees per update)."""
+    world = SyntheticWorld(modelo, OBJ, SyntheticConfig(seed=2))
+    u = world.grasp()
+    pf = ParticleFilter(modelo, OBJ, FilterConfig(n_particles=400, seed=0))
+    pf.initialize(world.observe(), u, world.nominal.theta, world.nominal.contact)
+    for name in ("theta", "normals", "anchors", "pos", "rot", "segments", "stiffness",
+                 "tendon", "valid"):
+        getattr(pf.state, name)[:50] = getattr(world.state, name)[0]
+    u = world.apply(random_action(np.random.default_rng(1), 3))
+    pf.step(u, world.observe())
+    distance = np.abs(pf.pack(pf.state) - pf.pack(world.state)[0]).max(axis=1)
+    assert distance.min() < 1e-9

@@ -183,3 +183,20 @@ def test_rolling_spin_gradient_matches_reference(modelo):
     st.rot[0] = st.rot[0] @ rotvec_to_matrix(rng.normal(0, 0.05, 3))
     e = check_derivatives(mm, st, u0, roll, e_rel=1e-10, hess_atol=None)
     assert e > MotionModel(modelo, obj, ROLL).evaluate(st, 0, u0, roll)[0]
+
+
+def test_reanchoring_keeps_the_grasp_force(modelo):
+    """Re-deriving the anchors at the current pose must keep each contact penalty's stretch:
+    zeroing it drops the squeeze, and a particle at equilibrium is no longer there (the
+    filter re-anchors every particle after jitter, so this was a bias of every iteration)."""
+    mm, st, u0 = grasp(modelo, n=2)
+    stretch = st.contact_residuals(modelo)
+    assert np.abs(stretch).max() > 1e-6  # the grasp force is there
+    kept = st.copy()
+    kept.anchor_to_pose(modelo, stretch)
+    np.testing.assert_allclose(kept.anchors, st.anchors, atol=1e-15)
+    zeroed = st.copy()
+    zeroed.anchor_to_pose(modelo)
+    theta0 = zeroed.theta.copy()
+    mm.solve(zeroed, u0)
+    assert np.degrees(np.abs(zeroed.theta - theta0).max()) > 0.003  # it relaxes

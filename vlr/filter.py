@@ -211,6 +211,8 @@ class FilterConfig:
             (the prior is wider than one action).
         project_jitter: settle jittered particles at the current command and re-anchor
             them (`ParticleFilter._project`); off reproduces plain Liu-West jitter.
+        jitter_keep_parent: the first copy of each resampled particle is kept as it was and
+            only its duplicates are jittered (`ParticleFilter._jitter`).
         observation: likelihood scales.
     """
 
@@ -227,6 +229,7 @@ class FilterConfig:
     motion: MotionConfig = field(default_factory=MotionConfig)
     init_jump_theta: float = 1.0
     project_jitter: bool = True
+    jitter_keep_parent: bool = True
     observation: ObservationModel = field(default_factory=ObservationModel)
 
 
@@ -430,20 +433,21 @@ class ParticleFilter:
         ci = self.ci_deg(x)
         tm["summary"] += time.perf_counter() - t
         t = time.perf_counter()
-        self._jitter(x)
+        self._jitter(x, idx)
         tm["jitter"] = time.perf_counter() - t
         rec = IterationRecord(self.iteration, self.command, prior, posterior, ess, beta,
                               n_invalid, ci)
         self.history.append(rec)
         return rec
 
-    def _jitter(self, x: np.ndarray) -> None:
+    def _jitter(self, x: np.ndarray, parents: np.ndarray | None = None) -> None:
         """Liu-West kernel over the sampled dimensions, then re-anchor (METHOD.md 8.2).
 
         x' = a x + (1 - a) mean + h L eps, with L L^T the particle covariance and
         a = sqrt(1 - h^2): the kernel adds h^2 of the variance and the shrink removes it."""
         cfg, state = self.config, self.state
         h = cfg.jitter_h
+        residuals = state.contact_residuals(self.model)
         mean = x.mean(axis=0)
         cov = np.cov(x, rowvar=False)
         d = cov.shape[0]
@@ -453,6 +457,11 @@ class ParticleFilter:
         eps = self.rng.standard_normal(x.shape)
         a = np.sqrt(1.0 - h * h) if cfg.liu_west_shrink else 1.0
         x_new = a * x + (1.0 - a) * mean + h * eps @ chol.T
+        if cfg.jitter_keep_parent and parents is not None:
+            # Systematic resampling returns sorted indexes, so copies are contiguous.
+            first = np.ones(len(parents), dtype=bool)
+            first[1:] = parents[1:] != parents[:-1]
+            x_new[first] = x[first]
         # Keep unknowns inside their priors (reflect at the bounds).
         base = x.shape[1] - len(self.unknowns)
         for j, u in enumerate(self.unknowns):
@@ -461,8 +470,9 @@ class ParticleFilter:
             col = np.where(col < lo, 2 * lo - col, col)
             x_new[:, base + j] = np.clip(np.where(col > hi, 2 * hi - col, col), lo, hi)
         self.unpack(x_new, state)
-        # The POM keeps its pose; the anchors follow the jittered contacts.
-        state.anchor_to_pose(self.model)
+        # The POM keeps its pose; the anchors follow the jittered contacts, each contact
+        # keeping its penalty stretch (the grasp force).
+        state.anchor_to_pose(self.model, residuals)
         if cfg.project_jitter:
             self._project(state)
 
@@ -480,9 +490,10 @@ class ParticleFilter:
         status, iters = self.motion.solve(state, self.command, self._project_cfg)
         self.project_status = np.bincount(status, minlength=5)
         self.newton_iterations["settle"] = float(np.median(iters))
+        residuals = state.contact_residuals(self.model)
         state.pos[...] = pos
         state.rot[...] = rot
-        state.anchor_to_pose(self.model)
+        state.anchor_to_pose(self.model, residuals)
 
     # ---- summaries
 

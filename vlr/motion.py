@@ -233,14 +233,27 @@ class ParticleState:
         """(P, N, 3) contact points in the palm frame by forward kinematics (Eq. 2)."""
         return contact_points(model, self.theta, self.normals, self.segments)
 
-    def anchor_to_pose(self, model: HandModel) -> None:
+    def anchor_to_pose(self, model: HandModel, residuals: np.ndarray | None = None) -> None:
         """Re-derive the anchors so that the current POM pose (pos, rot) matches the current
-        contacts: a_i = R^T (p_i - p). Used at initialisation and after jitter, so that a
+        contacts: a_i = R^T (p_i + r_i - p). Used at initialisation and after jitter, so that a
         jittered particle predicts the POM it had before (METHOD.md 8.2: a fixed anchor
-        biased the estimates by 3-5 degrees)."""
+        biased the estimates by 3-5 degrees).
+
+        `residuals` r (P, N, 3) [m] (`contact_residuals`, palm frame) keep each contact
+        penalty's stretch, i.e. the grasp forces; without them (r = 0) the particle loses its
+        squeeze and is no longer at equilibrium: measured on the synthetic world, a particle
+        AT the truth then moved by 0.5 degrees when settled again, every iteration."""
         c = self.contacts(model)
+        if residuals is not None:
+            c = c + residuals
         self.anchors = np.ascontiguousarray(
             np.einsum("pji,pnj->pni", self.rot, c - self.pos[:, None, :]))
+
+    def contact_residuals(self, model: HandModel) -> np.ndarray:
+        """(P, N, 3) anchor minus contact point in the palm frame, R a_i + p - p_i [m]: the
+        stretch of the contact penalty (Eq. 8 as a stiff spring), k_c times it the force."""
+        anchors_palm = np.einsum("pij,pnj->pni", self.rot, self.anchors) + self.pos[:, None, :]
+        return anchors_palm - self.contacts(model)
 
 
 def rotvec_to_matrix(w: np.ndarray) -> np.ndarray:
