@@ -47,3 +47,17 @@ def test_truth_is_used_only_for_scoring(modelo):
     a, b = run(True), run(False)
     assert len(a.scores) == len(a.history) and not b.scores
     np.testing.assert_array_equal(a.history[-1].posterior.mean, b.history[-1].posterior.mean)
+
+
+def test_a_snap_through_is_a_lost_grasp():
+    """NH1, seed 2: the true grasp sits at a fold of the energy and a 0.3 mm action flips the
+    thumb by 64 degrees. The world reports a lost grasp (a GraspError naming the joint), not a
+    new configuration the filter cannot follow by construction."""
+    from vlr.hand import GraspError
+    from vlr.trial import TrialSettings, open_world
+
+    w = open_world(TrialSettings(backend="synthetic", seed=2, true_hand="nh1",
+                                 unknowns=("length:left.proximal",)))
+    w.world.grasp()
+    with pytest.raises(GraspError, match="thumb.1 turned"):
+        w.world.apply(np.array([0.217e-3, 0.247e-3, -0.36e-3]))

@@ -56,7 +56,7 @@ class TrialSettings:
             hand's equilibrium from there (vlr.synthetic.nominal_grasp).
         prior_spread_deg: prior std of the joint angles about the nominal grasp [deg].
         rolling: rolling contacts in the filter's motion model (vlr.surface; measured by
-            `vlr gap`, docs/RESULTS.md).
+            `vlr gap`, docs/RESULTS.md), and in the synthetic world's, which is that model.
         exploration: "random" actions (the paper) or "active" (vlr.active).
         config: hardware only: the hardware YAML file.
     """
@@ -233,7 +233,11 @@ def open_world(settings: TrialSettings) -> World:
     if settings.backend == "synthetic":
         true_model = (HandModel.from_spec(load_hand(settings.true_hand))
                       if settings.true_hand else model)
-        world = SyntheticWorld(true_model, obj, SyntheticConfig(seed=settings.seed),
+        from vlr.motion import MotionConfig
+
+        world_cfg = SyntheticConfig(seed=settings.seed,
+                                    motion=MotionConfig().with_rolling(settings.rolling))
+        world = SyntheticWorld(true_model, obj, world_cfg,
                                nominal_model=model,
                                stiffness_overrides=_true_stiffness(settings, true_model))
         return World(world, world.observe, world.truth, model, obj, nominal, hand_spec,
