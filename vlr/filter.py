@@ -461,11 +461,13 @@ class ParticleFilter:
         eps = self.rng.standard_normal(x.shape)
         a = np.sqrt(1.0 - h * h) if cfg.liu_west_shrink else 1.0
         x_new = a * x + (1.0 - a) * mean + h * eps @ chol.T
+        moved = None
         if cfg.jitter_keep_parent and parents is not None:
             # Systematic resampling returns sorted indexes, so copies are contiguous.
             first = np.ones(len(parents), dtype=bool)
             first[1:] = parents[1:] != parents[:-1]
             x_new[first] = x[first]
+            moved = ~first
         # Keep unknowns inside their priors (reflect at the bounds).
         base = x.shape[1] - len(self.unknowns)
         for j, u in enumerate(self.unknowns):
@@ -478,9 +480,9 @@ class ParticleFilter:
         # keeping its penalty stretch (the grasp force).
         state.anchor_to_pose(self.model, residuals)
         if cfg.project_jitter:
-            self._project(state)
+            self._project(state, moved)
 
-    def _project(self, state: ParticleState) -> None:
+    def _project(self, state: ParticleState, moved: np.ndarray | None = None) -> None:
         """Settle jittered particles to equilibrium at the current command, then re-anchor.
 
         A jittered configuration is off its equilibrium (Eq. 9): left as is, the next motion
@@ -489,15 +491,23 @@ class ParticleFilter:
         trek with the action's effect, so most jittered particles lose their weight. Settling
         at u_t and re-deriving the anchors against the pre-jitter POM pose (METHOD.md 8.2)
         keeps each particle's POM where it was observed, so the next update weighs only the
-        action's effect, and the next solve is short."""
-        pos, rot = state.pos.copy(), state.rot.copy()
-        status, iters = self.motion.solve(state, self.command, self._project_cfg)
+        action's effect, and the next solve is short.
+
+        `moved` (P,) bool: only these particles were jittered; the others are still at their
+        equilibrium and are left alone (with the measured ESS, about half the particles)."""
+        if moved is None:
+            moved = np.ones(state.n, dtype=bool)
+        idx = np.flatnonzero(moved)
+        sub = state.take(idx)
+        status, iters = self.motion.solve(sub, self.command, self._project_cfg)
         self.project_status = np.bincount(status, minlength=5)
-        self.newton_iterations["settle"] = float(np.median(iters))
-        residuals = state.contact_residuals(self.model)
-        state.pos[...] = pos
-        state.rot[...] = rot
-        state.anchor_to_pose(self.model, residuals)
+        self.project_status[0] += state.n - len(idx)
+        self.newton_iterations["settle"] = float(np.median(iters)) if len(idx) else 0.0
+        residuals = sub.contact_residuals(self.model)
+        sub.pos[...] = state.pos[idx]
+        sub.rot[...] = state.rot[idx]
+        sub.anchor_to_pose(self.model, residuals)
+        state.put(idx, sub)
 
     # ---- summaries
 

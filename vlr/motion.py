@@ -208,6 +208,11 @@ class ParticleState:
         return ParticleState(**{f.name: np.ascontiguousarray(getattr(self, f.name)[idx])
                                 for f in fields(self)})
 
+    def put(self, idx: np.ndarray, other: ParticleState) -> None:
+        """Write the particles of `other` into the places `idx` of this state (in place)."""
+        for f in fields(self):
+            getattr(self, f.name)[idx] = getattr(other, f.name)
+
     def copy(self) -> ParticleState:
         return ParticleState(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
 
