@@ -13,6 +13,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import tasks
+from tests.env_rollout import rollout, same
 from vlr.errors import UserError
 
 QUICK = {"particles": 2000, "identify_iterations": 1, "n_cups": 1}
@@ -32,34 +33,11 @@ def test_cup_stacking_passes_the_env_checker_and_renders():
         env.close()
 
 
-def _rollout(seed: int, actions: np.ndarray):
-    env = gym.make(tasks.CUP_STACKING, **QUICK)
-    try:
-        obs, info = env.reset(seed=seed)
-        out = [(obs, 0.0, info)]
-        for a in actions:
-            obs, reward, terminated, truncated, info = env.step(a)
-            out.append((obs, reward, info))
-            if terminated or truncated:
-                break
-        return out
-    finally:
-        env.close()
-
-
-def _same(a, b) -> bool:
-    if isinstance(a, dict):
-        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
-    if isinstance(a, (list, tuple)):
-        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
-    return bool(np.array_equal(np.asarray(a), np.asarray(b)))
-
-
 def test_cup_stacking_is_deterministic_for_a_seed():
     actions = np.array([[1e-4, -1e-4, 0.5e-4], [-1e-4, 1e-4, 1e-4]])
-    a = _rollout(3, actions)
-    b = _rollout(3, actions)
-    assert _same(a, b)
+    a = rollout(tasks.CUP_STACKING, 3, actions, **QUICK)
+    b = rollout(tasks.CUP_STACKING, 3, actions, **QUICK)
+    assert same(a, b)
     assert "truth" in a[-1][2] and a[-1][1] <= 0.0
 
 

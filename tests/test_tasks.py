@@ -16,6 +16,7 @@ from gymnasium.utils.env_checker import check_env
 
 import tasks
 from tasks.letters import STROKES, letter_waypoints
+from tests.env_rollout import rollout, same
 
 QUICK = {"particles": 1000, "identify_iterations": 1}
 
@@ -47,34 +48,11 @@ def test_handwriting_passes_the_env_checker():
         env.close()
 
 
-def _rollout(env_id: str, seed: int, actions: np.ndarray, **kwargs):
-    env = gym.make(env_id, **QUICK, **kwargs)
-    try:
-        obs, info = env.reset(seed=seed)
-        out = [(obs, 0.0, info)]
-        for a in actions:
-            obs, reward, terminated, truncated, info = env.step(a)
-            out.append((obs, reward, info))
-            if terminated or truncated:
-                break
-        return out
-    finally:
-        env.close()
-
-
-def _same(a, b) -> bool:
-    if isinstance(a, dict):
-        return a.keys() == b.keys() and all(_same(a[k], b[k]) for k in a)
-    if isinstance(a, (list, tuple)):
-        return len(a) == len(b) and all(_same(x, y) for x, y in zip(a, b, strict=True))
-    return bool(np.array_equal(np.asarray(a), np.asarray(b)))
-
-
 def test_handwriting_is_deterministic_for_a_seed():
     actions = np.array([[1e-4, -1e-4, 0.5e-4], [-2e-4, 1e-4, 1e-4], [0.0, 0.0, -1e-4]])
-    a = _rollout(tasks.HANDWRITING, 3, actions, word="I")
-    b = _rollout(tasks.HANDWRITING, 3, actions, word="I")
-    assert _same(a, b)
+    a = rollout(tasks.HANDWRITING, 3, actions, word="I", **QUICK)
+    b = rollout(tasks.HANDWRITING, 3, actions, word="I", **QUICK)
+    assert same(a, b)
     assert "truth" in a[-1][2] and a[-1][1] <= 0.0   # sim ground truth in info; reward <= 0
 
 

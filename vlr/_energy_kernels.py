@@ -58,6 +58,18 @@ def _finger_chain(th, seg, nrm, pcx, pcy, prad, sphi, cphi, qy, qz):
 
 
 @njit(cache=True)
+def _separation(bp, rb, fx, fy, fz, p, R, ox, oy, oz):
+    """Palm-frame vector from a point fixed in O, (ox, oy, oz), to a point fixed in the
+    finger's base frame, (fx, fy, fz): bp + rb f - (p + R o)."""
+    return (bp[0] + rb[0, 0] * fx + rb[0, 1] * fy + rb[0, 2] * fz
+            - p[0] - (R[0, 0] * ox + R[0, 1] * oy + R[0, 2] * oz),
+            bp[1] + rb[1, 0] * fx + rb[1, 1] * fy + rb[1, 2] * fz
+            - p[1] - (R[1, 0] * ox + R[1, 1] * oy + R[1, 2] * oz),
+            bp[2] + rb[2, 0] * fx + rb[2, 1] * fy + rb[2, 2] * fz
+            - p[2] - (R[2, 0] * ox + R[2, 1] * oy + R[2, 2] * oz))
+
+
+@njit(cache=True)
 def _pair(i, k_n, px, py, pz, ax, ay, az, gam, Gam, iso, rb, R, qy, qz, jac, M, lam, gt,
           gA, A, B, gC, C):
     """Gradient and Hessian of phi(v), v = x(theta) - (p + R a): x a point fixed in finger i's
@@ -270,12 +282,7 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
             gam = vk[1]
             ax, ay, az = anc[i, 0], anc[i, 1], anc[i, 2]
             nx, ny, nz = rl[i, 3], rl[i, 4], rl[i, 5]
-            v0 = (base_pos[i, 0] + rb[0, 0] * cfx + rb[0, 1] * cfy + rb[0, 2] * cfz
-                  - p[0] - (R[0, 0] * ax + R[0, 1] * ay + R[0, 2] * az))
-            v1 = (base_pos[i, 1] + rb[1, 0] * cfx + rb[1, 1] * cfy + rb[1, 2] * cfz
-                  - p[1] - (R[1, 0] * ax + R[1, 1] * ay + R[1, 2] * az))
-            v2 = (base_pos[i, 2] + rb[2, 0] * cfx + rb[2, 1] * cfy + rb[2, 2] * cfz
-                  - p[2] - (R[2, 0] * ax + R[2, 1] * ay + R[2, 2] * az))
+            v0, v1, v2 = _separation(base_pos[i], rb, cfx, cfy, cfz, p, R, ax, ay, az)
             vn = v0 * nx + v1 * ny + v2 * nz
             t0, t1, t2 = v0 - vn * nx, v1 - vn * ny, v2 - vn * nz
             e += 0.5 * kc * (t0 * t0 + t1 * t1 + t2 * t2)
@@ -295,12 +302,7 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
             py = qy[k_n - 1] + pad_xy[i, 1] * c_last + pcz * s_last
             pz = qz[k_n - 1] - pad_xy[i, 1] * s_last + pcz * c_last
             ox, oy, oz = rl[i, 0], rl[i, 1], rl[i, 2]
-            d0 = (base_pos[i, 0] + rb[0, 0] * px + rb[0, 1] * py + rb[0, 2] * pz
-                  - p[0] - (R[0, 0] * ox + R[0, 1] * oy + R[0, 2] * oz))
-            d1 = (base_pos[i, 1] + rb[1, 0] * px + rb[1, 1] * py + rb[1, 2] * pz
-                  - p[1] - (R[1, 0] * ox + R[1, 1] * oy + R[1, 2] * oz))
-            d2 = (base_pos[i, 2] + rb[2, 0] * px + rb[2, 1] * py + rb[2, 2] * pz
-                  - p[2] - (R[2, 0] * ox + R[2, 1] * oy + R[2, 2] * oz))
+            d0, d1, d2 = _separation(base_pos[i], rb, px, py, pz, p, R, ox, oy, oz)
             dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
             reach = prm[P_RHO] + pad_r[i]
             g = dist - reach
