@@ -39,7 +39,7 @@ def config_dict(**overrides: Any) -> dict[str, Any]:
     data: dict[str, Any] = {
         "hand": "modelo",
         "object": "apple",
-        "bus": {"port": "emulator", "baud": 1_000_000, "latency_ms": 8, "retries": 2},
+        "bus": {"port": "emulator", "baud": 1_000_000, "latency_ms": 16, "retries": 2},
         "fingers": {"thumb": {"id": 1, "direction": 1},
                     "left": {"id": 2, "direction": -1},
                     "right": {"id": 3, "direction": 1}},

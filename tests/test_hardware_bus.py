@@ -25,7 +25,7 @@ def emu():
 @pytest.fixture
 def bus(emu):
     b = MotorBus(emu.port, 1_000_000, labels={1: "thumb", 2: "left", 3: "right"},
-                 latency_ms=8, retries=2)
+                 latency_ms=16, retries=2)
     b.connect()
     yield b
     b.close()
@@ -161,7 +161,7 @@ def test_interrupted_transaction_leaves_the_port_usable(bus, emu):
 def test_kinematic_plant_stalls_at_the_current_cap():
     plant = KinematicPlant(taut={1: 2100.0}, preload=60, stiffness=1.0)
     with Emulator([1], plant=plant) as emu:
-        bus = MotorBus(emu.port, 1_000_000, latency_ms=8)
+        bus = MotorBus(emu.port, 1_000_000, latency_ms=16)
         bus.connect()
         try:
             bus.write(Reg.OPERATING_MODE, 1, int(OperatingMode.CURRENT_BASED_POSITION))
