@@ -49,15 +49,48 @@ def test_truth_is_used_only_for_scoring(modelo):
     np.testing.assert_array_equal(a.history[-1].posterior.mean, b.history[-1].posterior.mean)
 
 
+def nh1_world(probe_action: float) -> SyntheticWorld:
+    """NH1 seed 2 as `vlr.trial.open_world` builds it, with the given stability probe."""
+    nh1 = HandModel.from_spec(load_hand("nh1"))
+    nominal = HandModel.from_spec(load_hand("modelo"))
+    return SyntheticWorld(nh1, OBJ, SyntheticConfig(seed=2, probe_action=probe_action),
+                          nominal_model=nominal)
+
+
 def test_a_snap_through_is_a_lost_grasp():
-    """NH1, seed 2: the true grasp sits at a fold of the energy and a 0.3 mm action flips the
-    thumb by 64 degrees. The world reports a lost grasp (a GraspError naming the joint), not a
-    new configuration the filter cannot follow by construction."""
+    """NH1, seed 2: the first truth drawn sits at a fold of the energy and a 0.3 mm action
+    flips the thumb by over 60 degrees, in 64 steps as in one. Without the stability probe the
+    world reports a lost grasp (a GraspError naming the joint), not a new configuration the
+    filter cannot follow by construction."""
     from vlr.hand import GraspError
+
+    world = nh1_world(probe_action=0.0)
+    world.grasp()
+    with pytest.raises(GraspError, match="thumb.1 turned .* in 64 steps"):
+        world.apply(np.array([0.217e-3, 0.247e-3, -0.36e-3]))
+
+
+def test_a_grasp_at_a_fold_is_drawn_again():
+    """With the probe (the default) that truth is rejected and redrawn; the new one takes the
+    largest actions (0.4 mm) without a snap."""
+    world = nh1_world(probe_action=0.4e-3)
+    world.grasp()
+    assert world.regrasps >= 1
+    start = world.truth().theta
+    for signs in ([1, 1, -1], [-1, -1, 1], [1, -1, 1]):
+        world.apply(0.4e-3 * np.array(signs, dtype=float))
+        world.apply(-0.4e-3 * np.array(signs, dtype=float))
+    assert np.degrees(np.abs(world.truth().theta - start).max()) < 14
+
+
+def test_a_large_continuous_turn_is_followed_not_called_a_snap():
+    """NH1 seed 1's left distal turns 16 degrees on one 0.33-0.38 mm action: more than the
+    one-solve snap test, but continuous when the action is followed in steps."""
     from vlr.trial import TrialSettings, open_world
 
-    w = open_world(TrialSettings(backend="synthetic", seed=2, true_hand="nh1",
+    w = open_world(TrialSettings(backend="synthetic", seed=1, true_hand="nh1",
                                  unknowns=("length:left.proximal",)))
     w.world.grasp()
-    with pytest.raises(GraspError, match="thumb.1 turned"):
-        w.world.apply(np.array([0.217e-3, 0.247e-3, -0.36e-3]))
+    before = w.world.truth().theta
+    w.world.apply(np.array([0.334e-3, 0.381e-3, 0.373e-3]))
+    assert np.degrees(np.abs(w.world.truth().theta - before).max()) > 1

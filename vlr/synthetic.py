@@ -43,8 +43,17 @@ class SyntheticConfig:
         snap_theta: a joint turning more than this in one action is a snap-through [rad]:
             the grasp sat at a fold of the energy and jumped to another branch (measured:
             NH1 seed 2's true grasp flipped its thumb 64 degrees on a 0.3 mm action, and did
-            so even with the action split into 64 steps). The world reports it as a lost
-            grasp, as a real hand's would be (METHOD.md 7: the contacts must stay stable).
+            so even with the action split into 64 steps). A larger turn in one solve is
+            followed in up to 64 steps before it is called a snap (`SyntheticWorld.apply`).
+            The world reports a snap as a lost grasp, as a real hand's would be (METHOD.md 7:
+            the contacts must stay stable).
+        probe_action: a drawn truth is probed with each tendon alone pulled and released by
+            this much (2 N actions) [m]; one that snaps is a grasp at a fold, and the world
+            grasps again (as an experimenter re-places an object that does not sit stably).
+            0 turns the probe off. The default is the largest exploratory action. Probing
+            every sign combination instead (2^N actions) rejected 1-3 of 6 NH1 draws per
+            seed, including draws that then ran 60 random actions without a snap.
+        max_regrasps: draws before `grasp` gives up with a GraspError.
     """
 
     seed: int = 0
@@ -58,6 +67,8 @@ class SyntheticConfig:
     contact_offset: float = 0.08
     motion: MotionConfig = MotionConfig()
     snap_theta: float = 0.25
+    probe_action: float = 0.4e-3
+    max_regrasps: int = 10
 
 
 @dataclass(frozen=True)
@@ -142,6 +153,7 @@ class SyntheticWorld:
         self._tendon = tendon_stiffness
         self.nominal = nominal_grasp(self.nominal_model, obj, self.config)
         self.state: ParticleState | None = None
+        self.regrasps = 0
         self._commands = np.zeros(true_model.n_fingers)
 
     @property
@@ -149,9 +161,24 @@ class SyntheticWorld:
         return self._commands.copy()
 
     def grasp(self) -> np.ndarray:
-        """Place the truth near the nominal grasp (random offsets) and settle at u_0.
+        """Place the truth near the nominal grasp (random offsets) and settle at u_0; a truth
+        that snaps under a probe action is drawn again (`SyntheticConfig.probe_action`).
 
         Returns the commands u_0 (N,) [m]."""
+        cfg = self.config
+        for attempt in range(cfg.max_regrasps + 1):
+            self.state = self._draw()
+            self._commands = self.nominal.command.copy()
+            fold = self._probe()
+            if fold is None:
+                self.regrasps = attempt
+                return self.commands
+        self.state = None
+        raise GraspError(f"no stable synthetic grasp in {cfg.max_regrasps + 1} draws "
+                         f"(seed {cfg.seed}); the last one: {fold}")
+
+    def _draw(self) -> ParticleState:
+        """One truth: the nominal guess plus random offsets, settled at u_0."""
         cfg, m, rng = self.config, self.model, self.rng
         nf = m.n_fingers
         theta = self.nominal.theta + rng.normal(0.0, cfg.theta_offset, self.nominal.theta.shape)
@@ -166,36 +193,73 @@ class SyntheticWorld:
         st.pos[0] = c.mean(axis=0) - np.array([0.0, 0.0, cfg.pom_depth])
         st.rot[0] = rotvec_to_matrix(rng.normal(0.0, 0.05, 3))
         st.anchor_to_pose(m)
-        self._commands = self.nominal.command.copy()
         settle = replace(cfg.motion, max_iter=500, jump_theta=np.pi, jump_pos=1.0)
-        status, _ = self.motion.solve(st, self._commands, settle)
+        status, _ = self.motion.solve(st, self.nominal.command, settle)
         if status[0] != 0:
             raise RuntimeError(f"synthetic grasp did not settle (status {status[0]})")
-        self.state = st
-        return self.commands
+        return st
+
+    def _probe(self) -> str | None:
+        """Why the current truth is at a fold (the first probe action that snaps or loses
+        it), or None if every probe action moves it continuously."""
+        a = self.config.probe_action
+        if a <= 0:
+            return None
+        n = self.model.n_fingers
+        for probe in np.concatenate([a * np.eye(n), -a * np.eye(n)]):
+            try:
+                self._move(probe)
+            except GraspError as e:
+                return str(e)
+        return None
 
     def apply(self, delta: np.ndarray) -> np.ndarray:
-        """Change the tendon commands by `delta` (N,) [m] and settle; returns the commands."""
+        """Change the tendon commands by `delta` (N,) [m] and settle; returns the commands.
+
+        A joint turning more than `snap_theta` in one solve may still be a continuous move of
+        a compliant grasp: the action is then followed in 8, 16, ... 64 equal steps, and only
+        a path whose every step stays under the filter's jump limit is accepted (its end, the
+        configuration continuity reaches). A path that still jumps is a snap-through."""
         if self.state is None:
             raise RuntimeError("grasp() first")
-        new = self._commands + np.asarray(delta, dtype=float)
-        trial = self.state.copy()
-        # The world is not limited to small moves: only a failed solve loses the grasp.
-        cfg = replace(self.config.motion, max_iter=300, jump_theta=np.pi, jump_pos=1.0)
-        status, _ = self.motion.solve(trial, new, cfg, u_from=self._commands)
-        if status[0] != 0:
-            raise GraspError(f"synthetic world lost the grasp (status {status[0]})")
-        turn = np.abs(trial.theta[0] - self.state.theta[0])
+        self.state = self._move(delta)
+        self._commands = self._commands + np.asarray(delta, dtype=float)
+        return self.commands
+
+    def _move(self, delta: np.ndarray) -> ParticleState:
+        """The truth after the action `delta` (`apply`), or a GraspError; commits nothing."""
+        delta = np.asarray(delta, dtype=float)
+        trial, turn = self._follow(delta, 1)
+        steps = 8
+        while turn.max() > self.config.snap_theta and steps <= 64:
+            trial, turn = self._follow(delta, steps)
+            steps *= 2
         if turn.max() > self.config.snap_theta:
             i, k = np.unravel_index(np.argmax(turn), turn.shape)
             raise GraspError(
                 f"the synthetic grasp snapped through: joint {self.model.names[i]}.{k} "
                 f"turned {np.degrees(turn[i, k]):.0f} degrees on the action "
-                f"{np.round(np.asarray(delta) * 1e3, 3).tolist()} mm (snap_theta "
-                f"{np.degrees(self.config.snap_theta):.0f} degrees)")
-        self.state = trial
-        self._commands = new
-        return self.commands
+                f"{np.round(delta * 1e3, 3).tolist()} mm, in {steps // 2} steps as in one "
+                f"(snap_theta {np.degrees(self.config.snap_theta):.0f} degrees)")
+        return trial
+
+    def _follow(self, delta: np.ndarray, steps: int) -> tuple[ParticleState, np.ndarray]:
+        """The truth after the action made in `steps` equal solves, and the largest turn of
+        each joint in any one of them (N, K) [rad]."""
+        trial = self.state.copy()
+        # The world is not limited to small moves: only a failed solve loses the grasp.
+        cfg = replace(self.config.motion, max_iter=300, jump_theta=np.pi, jump_pos=1.0)
+        turn = np.zeros_like(trial.theta[0])
+        u = self._commands.copy()
+        for j in range(1, steps + 1):
+            target = self._commands + delta * (j / steps)
+            before = trial.theta[0].copy()
+            status, _ = self.motion.solve(trial, target, cfg, u_from=u)
+            if status[0] != 0:
+                raise GraspError(f"synthetic world lost the grasp (status {status[0]})")
+            turn = np.maximum(turn, np.abs(trial.theta[0] - before))
+            u = target
+        return trial, turn
 
     def observe(self) -> PomObservation:
         """The POM pose plus Gaussian noise (METHOD.md 8.2 camera accuracy)."""

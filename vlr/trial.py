@@ -329,6 +329,8 @@ def run_trial(settings: TrialSettings, out: Path | None = None,
     summary = summarize(result, w.model, args, time.perf_counter() - t0,
                         truths[-1] if truths else None)
     summary["settings"] = settings.to_dict()
+    if hasattr(w.world, "regrasps"):  # synthetic: truths drawn again for sitting at a fold
+        summary["world_regrasps"] = int(w.world.regrasps)
     if out is not None:
         write_outputs(Path(out), result, summary, w.model, truths)
     return summary
