@@ -45,6 +45,12 @@ def test_sweep_runs_resumes_and_never_repeats_a_finished_trial(sweep_file, tmp_p
     before = (out / "summary.csv").read_text()
     assert main(["sweep", str(sweep_file), "--table-only"]) == 0
     assert (out / "summary.csv").read_text() == before
+    # A record broken by hand is one error naming its file, not a traceback.
+    files[1].write_text('{"id": "half a rec')
+    capsys.readouterr()
+    assert main(["sweep", str(sweep_file), "--table-only"]) == 2
+    assert f"{files[1]} is not valid JSON" in capsys.readouterr().err
+    assert (out / "summary.csv").read_text() == before
 
 
 def test_same_seed_same_numbers(tmp_path):

@@ -201,6 +201,20 @@ def trial_path(out: Path, trial: Trial) -> Path:
     return out / "trials" / f"{trial.id}.json"
 
 
+def read_record(path: Path) -> dict[str, Any]:
+    """One trial record; a file that is not one (edited by hand, a full disk) is a UserError
+    naming it."""
+    try:
+        rec = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise UserError(f"trial record {path} is not valid JSON ({exc}); delete it to run "
+                        f"that trial again") from None
+    if not isinstance(rec, dict) or "status" not in rec:
+        raise UserError(f"trial record {path} has no 'status'; delete it to run that trial "
+                        f"again")
+    return rec
+
+
 def pending(trials: Iterable[Trial], out: Path, retry_failed: bool = False) -> list[Trial]:
     """Trials without a result file (and failed ones, if asked)."""
     todo = []
@@ -208,7 +222,7 @@ def pending(trials: Iterable[Trial], out: Path, retry_failed: bool = False) -> l
         p = trial_path(out, t)
         if not p.exists():
             todo.append(t)
-        elif retry_failed and json.loads(p.read_text()).get("status") != "ok":
+        elif retry_failed and read_record(p).get("status") != "ok":
             todo.append(t)
     return todo
 
@@ -281,7 +295,7 @@ def collect(out: Path, trials: Iterable[Trial] | None = None) -> list[dict[str, 
         paths = sorted((out / "trials").glob("*.json"))
     else:
         paths = [trial_path(out, t) for t in trials]
-    return [json.loads(p.read_text()) for p in paths if p.exists()]
+    return [read_record(p) for p in paths if p.exists()]
 
 
 def _fmt(values: list[float], digits: int) -> str:
