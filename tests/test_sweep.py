@@ -119,3 +119,17 @@ def test_a_record_that_cannot_be_written_leaves_no_file(tmp_path):
     with pytest.raises(TypeError):
         write_json_atomic(tmp_path / "r.json", {"x": object()})
     assert list(tmp_path.iterdir()) == []
+
+
+def test_records_are_strict_json(tmp_path):
+    """A NaN (a gap ratio over no motion, an error with no truth) is written as null: strict
+    readers (JavaScript, jq) reject Python's default `NaN`."""
+    import numpy as np
+
+    from vlr.io import write_json_atomic
+
+    write_json_atomic(tmp_path / "r.json", {"a": float("nan"), "b": [np.float64(np.inf), 1.5],
+                                            "c": np.array([np.nan, 2.0])})
+    text = (tmp_path / "r.json").read_text()
+    assert "NaN" not in text and "Infinity" not in text
+    assert json.loads(text) == {"a": None, "b": [None, 1.5], "c": [None, 2.0]}

@@ -54,6 +54,22 @@ def write_text_atomic(path: str | Path, text: str) -> Path:
     return Path(path)
 
 
+def _strict(o: Any) -> Any:
+    """`o` with NaN and infinities as None: strict JSON has no NaN, and other readers
+    (JavaScript, jq) reject the `NaN` Python's json writes by default."""
+    if isinstance(o, dict):
+        return {k: _strict(v) for k, v in o.items()}
+    if isinstance(o, list | tuple):
+        return [_strict(v) for v in o]
+    if isinstance(o, np.ndarray):
+        return _strict(o.tolist())
+    if isinstance(o, float | np.floating):
+        return float(o) if np.isfinite(o) else None
+    return o
+
+
 def write_json_atomic(path: str | Path, data: Any) -> None:
-    """Write `data` as JSON to `path` atomically (temp file in the same folder, then rename)."""
-    write_text_atomic(path, json.dumps(data, indent=2, default=_default) + "\n")
+    """Write `data` as strict JSON (a non-finite number becomes null) to `path` atomically
+    (temp file in the same folder, then rename)."""
+    text = json.dumps(_strict(data), indent=2, default=_default, allow_nan=False)
+    write_text_atomic(path, text + "\n")
