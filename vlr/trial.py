@@ -23,7 +23,8 @@ import numpy as np
 
 from vlr.errors import UserError
 
-__all__ = ["TrialSettings", "World", "open_world", "run_trial", "DEFAULT_SIGMA"]
+__all__ = ["TrialSettings", "World", "TrialRun", "open_world", "identify_trial", "run_trial",
+           "DEFAULT_SIGMA"]
 
 # Likelihood scales (sigma_pos [mm], sigma_rot [deg]) per backend (vlr.observation). The
 # synthetic world IS the model, so only its observation noise (0.05 mm, 0.2 deg) counts, with a
@@ -303,10 +304,26 @@ def identify_config(settings: TrialSettings, model):
                           exploration=settings.exploration)
 
 
-def run_trial(settings: TrialSettings, out: Path | None = None,
-              progress: Callable | None = None, watch: Callable | None = None) -> dict:
-    """Run one trial; write its files into `out` if given; return the result summary."""
-    from vlr.commands.identify import summarize, write_outputs
+@dataclass
+class TrialRun:
+    """What one trial produced: the `result.json` summary and, for pictures and tables, the
+    filter's result (`vlr.identify.IdentifyResult`), the nominal model and the truths scored
+    at each iteration (scoring only)."""
+
+    summary: dict[str, Any]
+    result: Any
+    model: Any
+    truths: list
+
+
+def identify_trial(settings: TrialSettings, progress: Callable | None = None,
+                   watch: Callable | None = None,
+                   observe_through: Callable[[World], Callable] | None = None) -> TrialRun:
+    """Open the trial's world, run the identification loop, close the world, score.
+
+    `observe_through(world)` may return another observer to use (the live view wraps the
+    camera's with one that also draws it)."""
+    from vlr.commands.identify import summarize
     from vlr.identify import identify
 
     t0 = time.perf_counter()
@@ -319,7 +336,8 @@ def run_trial(settings: TrialSettings, out: Path | None = None,
             def scorer():  # scoring only; the filter never sees this
                 truths.append(w.truth())
                 return truths[-1]
-        result = identify(w.world, w.observer, w.model, w.obj, w.nominal, cfg, truth=scorer,
+        observer = w.observer if observe_through is None else observe_through(w)
+        result = identify(w.world, observer, w.model, w.obj, w.nominal, cfg, truth=scorer,
                           progress=progress, watch=watch)
     finally:
         w.close()
@@ -331,6 +349,16 @@ def run_trial(settings: TrialSettings, out: Path | None = None,
     summary["settings"] = settings.to_dict()
     if hasattr(w.world, "regrasps"):  # synthetic: truths drawn again for sitting at a fold
         summary["world_regrasps"] = int(w.world.regrasps)
+    return TrialRun(summary, result, w.model, truths)
+
+
+def run_trial(settings: TrialSettings, out: Path | None = None,
+              progress: Callable | None = None, watch: Callable | None = None) -> dict:
+    """Run one trial (`identify_trial`); write its files into `out` if given; return the
+    result summary."""
+    from vlr.commands.identify import write_outputs
+
+    run = identify_trial(settings, progress, watch)
     if out is not None:
-        write_outputs(Path(out), result, summary, w.model, truths)
-    return summary
+        write_outputs(Path(out), run.result, run.summary, run.model, run.truths)
+    return run.summary

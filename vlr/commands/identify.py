@@ -12,12 +12,9 @@ anything unless asked for.
 from __future__ import annotations
 
 import argparse
-import time
 from pathlib import Path
 
 import numpy as np
-
-from vlr.errors import UserError
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -106,9 +103,8 @@ def _finish_view(view, args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from vlr.identify import identify
     from vlr.plots import CloudRecorder, particle_cloud
-    from vlr.trial import TrialSettings, identify_config, open_world
+    from vlr.trial import TrialSettings, identify_trial
 
     out = Path(args.out)
     settings = TrialSettings(
@@ -119,16 +115,6 @@ def run(args: argparse.Namespace) -> int:
         sigma_rot_deg=args.sigma_rot_deg, config=args.config,
         nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg,
         rolling=args.rolling, exploration=args.exploration)
-    w = open_world(settings)
-    hand = w.hand
-    try:
-        cfg = identify_config(settings, w.model)
-    except UserError:
-        w.close()
-        raise
-    world, observer, truth = w.world, w.observer, w.truth
-    model, obj, nominal = w.model, w.obj, w.nominal
-    hand_spec, obj_spec = w.hand_spec, w.object_spec
     bar = None
     if not args.quiet:
         from tqdm import tqdm
@@ -148,29 +134,23 @@ def run(args: argparse.Namespace) -> int:
         for w in watchers:
             w(pf, rec)
 
-    t0 = time.perf_counter()
-    truths: list = []  # one per scored iteration: for the plot and the final errors only
-    scorer = None
-    if truth is not None:
-        def scorer():  # scoring only; the filter never sees this
-            truths.append(truth())
-            return truths[-1]
     view = None
+
+    def observe_through(w):
+        nonlocal view
+        if not (args.view or args.view_html):
+            return w.observer
+        view = _open_view(args, w.model, w.hand_spec, w.object_spec, w.truth)
+        watchers.append(view)
+        return view.observing(w.observer)
+
     try:
         try:
-            if args.view or args.view_html:
-                view = _open_view(args, model, hand_spec, obj_spec, truth)
-                observer = view.observing(observer)
-                watchers.append(view)
-            result = identify(world, observer, model, obj, nominal, cfg, truth=scorer,
-                              progress=progress, watch=watch)
+            run = identify_trial(settings, progress, watch, observe_through)
         finally:
             if bar is not None:
                 bar.close()
-            if hand is not None:
-                hand.close()
-        final_truth = truths[-1] if truths else None
-        summary = summarize(result, model, args, time.perf_counter() - t0, final_truth)
+        result, summary, model, truths = run.result, run.summary, run.model, run.truths
         write_outputs(out, result, summary, model, truths)
         truth_at = ({r.iteration: t.theta for r, t in zip(result.history, truths, strict=True)}
                     if truths else None)
