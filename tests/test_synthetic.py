@@ -59,14 +59,14 @@ def nh1_world(probe_action: float) -> SyntheticWorld:
 
 def test_a_snap_through_is_a_lost_grasp():
     """NH1, seed 2: the first truth drawn sits at a fold of the energy and a 0.3 mm action
-    flips the thumb by over 60 degrees, in 64 steps as in one. Without the stability probe the
-    world reports a lost grasp (a GraspError naming the joint), not a new configuration the
-    filter cannot follow by construction."""
+    flips the thumb by over 60 degrees, in 16 steps as in one (64 too). Without the stability
+    probe the world reports a lost grasp (a GraspError naming the joint), not a new
+    configuration the filter cannot follow by construction."""
     from vlr.hand import GraspError
 
     world = nh1_world(probe_action=0.0)
     world.grasp()
-    with pytest.raises(GraspError, match="thumb.1 turned .* in 64 steps"):
+    with pytest.raises(GraspError, match="thumb.1 turned .* in 16 steps"):
         world.apply(np.array([0.217e-3, 0.247e-3, -0.36e-3]))
 
 
@@ -94,3 +94,22 @@ def test_a_large_continuous_turn_is_followed_not_called_a_snap():
     before = w.world.truth().theta
     w.world.apply(np.array([0.334e-3, 0.381e-3, 0.373e-3]))
     assert np.degrees(np.abs(w.world.truth().theta - before).max()) > 1
+
+
+def test_the_filter_follows_what_the_world_calls_continuous(modelo):
+    """Seed 0's second action turns the right distal joint 38 degrees, continuously (16 steps
+    of at most 13 degrees; one solve does not converge). The filter's motion model follows
+    it from the true configuration to the world's, where its one-solve jump test used to
+    drop the truth (`MotionConfig.follow_substeps`)."""
+    from vlr.motion import MotionModel
+
+    world = SyntheticWorld(modelo, OBJ, SyntheticConfig(seed=0))
+    world.grasp()
+    rng = np.random.default_rng(1)
+    u1 = world.apply(random_action(rng, 3))
+    start = world.state.copy()
+    u2 = world.apply(random_action(rng, 3))
+    assert np.degrees(np.abs(world.state.theta - start.theta).max()) > 30
+    status, _ = MotionModel(modelo, OBJ).solve(start, u2, u_from=u1)
+    assert status[0] == 0
+    np.testing.assert_allclose(start.theta, world.state.theta, atol=1e-9)

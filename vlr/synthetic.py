@@ -44,7 +44,8 @@ class SyntheticConfig:
             the grasp sat at a fold of the energy and jumped to another branch (measured:
             NH1 seed 2's true grasp flipped its thumb 64 degrees on a 0.3 mm action, and did
             so even with the action split into 64 steps). A larger turn in one solve is
-            followed in up to 64 steps before it is called a snap (`SyntheticWorld.apply`).
+            followed in `motion.follow_substeps` steps before it is called a snap
+            (`SyntheticWorld.apply`).
             The world reports a snap as a lost grasp, as a real hand's would be (METHOD.md 7:
             the contacts must stay stable).
         probe_action: a drawn truth is probed with each tendon alone pulled and released by
@@ -217,9 +218,10 @@ class SyntheticWorld:
         """Change the tendon commands by `delta` (N,) [m] and settle; returns the commands.
 
         A joint turning more than `snap_theta` in one solve may still be a continuous move of
-        a compliant grasp: the action is then followed in 8, 16, ... 64 equal steps, and only
-        a path whose every step stays under the filter's jump limit is accepted (its end, the
-        configuration continuity reaches). A path that still jumps is a snap-through."""
+        a compliant grasp: the action is then followed in `motion.follow_substeps` equal
+        steps, the filter's own test (`vlr.motion.MotionConfig.follow_substeps`), and a path
+        whose every step stays under `snap_theta` is accepted (its end: the configuration
+        continuity reaches). A path that still jumps is a snap-through."""
         if self.state is None:
             raise RuntimeError("grasp() first")
         self.state = self._move(delta)
@@ -230,16 +232,15 @@ class SyntheticWorld:
         """The truth after the action `delta` (`apply`), or a GraspError; commits nothing."""
         delta = np.asarray(delta, dtype=float)
         trial, turn = self._follow(delta, 1)
-        steps = 8
-        while turn.max() > self.config.snap_theta and steps <= 64:
+        steps = self.config.motion.follow_substeps
+        if turn.max() > self.config.snap_theta and steps > 1:
             trial, turn = self._follow(delta, steps)
-            steps *= 2
         if turn.max() > self.config.snap_theta:
             i, k = np.unravel_index(np.argmax(turn), turn.shape)
             raise GraspError(
                 f"the synthetic grasp snapped through: joint {self.model.names[i]}.{k} "
                 f"turned {np.degrees(turn[i, k]):.0f} degrees on the action "
-                f"{np.round(delta * 1e3, 3).tolist()} mm, in {steps // 2} steps as in one "
+                f"{np.round(delta * 1e3, 3).tolist()} mm, in {steps} steps as in one "
                 f"(snap_theta {np.degrees(self.config.snap_theta):.0f} degrees)")
         return trial
 

@@ -224,20 +224,25 @@ def open_world(settings: TrialSettings) -> World:
     model = HandModel.from_spec(hand_spec)
     check_unknowns(settings, model)  # before a backend opens (and must be closed)
     obj = ObjectParams.from_spec(obj_spec)
-    guess = SyntheticConfig()
+    from vlr.motion import MotionConfig
+
+    # The nominal guess is the filter's own model's equilibrium: with rolling contacts the
+    # pads roll while the grasp settles, and the distal joints settle 25-30 degrees from the
+    # pinned equilibrium (measured, synthetic seed 0): a pinned guess would centre the
+    # prior there, away from every rolling grasp.
+    motion = MotionConfig().with_rolling(settings.rolling)
+    guess = SyntheticConfig(motion=motion)
     if settings.nominal_theta_deg is not None:
         if len(settings.nominal_theta_deg) != model.n_joints:
             raise UserError(f"nominal_theta_deg {list(settings.nominal_theta_deg)}: give "
                             f"{model.n_joints} angles, one per joint")
-        guess = SyntheticConfig(grasp_theta=tuple(np.radians(settings.nominal_theta_deg)))
+        guess = SyntheticConfig(grasp_theta=tuple(np.radians(settings.nominal_theta_deg)),
+                                motion=motion)
     nominal = nominal_grasp(model, obj, guess)
     if settings.backend == "synthetic":
         true_model = (HandModel.from_spec(load_hand(settings.true_hand))
                       if settings.true_hand else model)
-        from vlr.motion import MotionConfig
-
-        world_cfg = SyntheticConfig(seed=settings.seed,
-                                    motion=MotionConfig().with_rolling(settings.rolling))
+        world_cfg = SyntheticConfig(seed=settings.seed, motion=motion)
         world = SyntheticWorld(true_model, obj, world_cfg,
                                nominal_model=model,
                                stiffness_overrides=_true_stiffness(settings, true_model))
