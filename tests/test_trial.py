@@ -24,3 +24,18 @@ def test_the_filter_models_the_object_the_hardware_config_names():
         assert w.obj.mass == pytest.approx(w.object_spec.mass)
     finally:
         w.close()
+
+
+def test_a_nominal_guess_per_finger():
+    """K angles guess every finger alike; N x K guess each finger (a thumb wrapped round a
+    thin shaft); any other count is one error naming the counts."""
+    import numpy as np
+
+    alike = open_world(TrialSettings(backend="synthetic", nominal_theta_deg=(-10, 15)))
+    wrapped = open_world(TrialSettings(backend="synthetic",
+                                       nominal_theta_deg=(-10, 70, -10, 15, -10, 15)))
+    thumb = alike.model.names.index("thumb")
+    assert np.degrees(wrapped.nominal.theta[thumb, 1]) > 50
+    assert np.degrees(alike.nominal.theta[thumb, 1]) < 40
+    with pytest.raises(UserError, match="give 2 angles .* or 6"):
+        open_world(TrialSettings(backend="synthetic", nominal_theta_deg=(-10, 15, 3)))

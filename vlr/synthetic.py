@@ -32,7 +32,8 @@ class SyntheticConfig:
         seed: seed of the world's own Generator (truth offsets and observation noise).
         noise_pos: observation noise std per axis [m].
         noise_rot: observation rotation noise std per axis [rad].
-        grasp_theta: (K,) joint angles of the nominal grasp guess, every finger [rad]; the
+        grasp_theta: (K,) joint angles of the nominal grasp guess, every finger alike, or
+            (N K,) finger by finger [rad]; the
             default (-0.3, 1.2) puts the Model O pads on a ~36 mm wide object.
         grasp_contact: (alpha, beta) of the nominal pad contact [rad].
         pom_depth: POM (tag) below the contacts' centroid [m].
@@ -105,7 +106,9 @@ def nominal_grasp(model: HandModel, obj: ObjectParams, config: SyntheticConfig) 
     the starting angles are far from equilibrium (the spring preload curls one finger and
     straightens the others), and a prior centred off-equilibrium loses most particles."""
     nf = model.n_fingers
-    theta = np.tile(np.asarray(config.grasp_theta, dtype=float), (nf, 1))
+    guess = np.asarray(config.grasp_theta, dtype=float)
+    theta = (guess.reshape(nf, model.n_joints) if guess.size == nf * model.n_joints
+             else np.tile(guess, (nf, 1)))
     contact = np.tile(np.asarray(config.grasp_contact, dtype=float), (nf, 1))
     u0 = model.tendon_takeup(theta) + config.grasp_tension / model.tendon_stiffness
     st = ParticleState.nominal(model, 1, theta, normals_from_angles(contact[:, 0], contact[:, 1]),

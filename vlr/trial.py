@@ -51,8 +51,10 @@ class TrialSettings:
         true_stiffness: synthetic only: {"finger.joint": k [N m/rad]} true spring rates.
         max_iterations: action budget; min_iterations: no convergence stop before this.
         sigma_pos_mm, sigma_rot_deg: likelihood scales; None takes `DEFAULT_SIGMA`.
-        nominal_theta_deg: the user's guess of the grasp's joint angles, every finger, one
-            per joint [deg] (what one sees looking at the hand); None: the synthetic world's
+        nominal_theta_deg: the user's guess of the grasp's joint angles [deg] (what one sees
+            looking at the hand): K angles for every finger alike, or N x K, finger by
+            finger in the hand's order (a thumb that wraps a thin object); None: the
+            synthetic world's
             generic guess (vlr.synthetic.SyntheticConfig.grasp_theta). The prior is the nominal
             hand's equilibrium from there (vlr.synthetic.nominal_grasp).
         prior_spread_deg: prior std of the joint angles about the nominal grasp [deg].
@@ -147,7 +149,8 @@ class TrialSettings:
         if self.nominal_theta_deg is not None and (
                 not isinstance(self.nominal_theta_deg, list | tuple)
                 or not all(is_real(v) for v in self.nominal_theta_deg)):
-            raise bad("nominal_theta_deg", "a list of angles [deg], one per joint")
+            raise bad("nominal_theta_deg", "a list of angles [deg], one per joint (or one "
+                      "per joint of every finger)")
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> TrialSettings:
@@ -233,9 +236,12 @@ def open_world(settings: TrialSettings) -> World:
     motion = MotionConfig().with_rolling(settings.rolling)
     guess = SyntheticConfig(motion=motion)
     if settings.nominal_theta_deg is not None:
-        if len(settings.nominal_theta_deg) != model.n_joints:
+        n = len(settings.nominal_theta_deg)
+        if n not in (model.n_joints, model.n_fingers * model.n_joints):
             raise UserError(f"nominal_theta_deg {list(settings.nominal_theta_deg)}: give "
-                            f"{model.n_joints} angles, one per joint")
+                            f"{model.n_joints} angles (every finger alike) or "
+                            f"{model.n_fingers * model.n_joints} (fingers "
+                            f"{', '.join(model.names)}, {model.n_joints} each)")
         guess = SyntheticConfig(grasp_theta=tuple(np.radians(settings.nominal_theta_deg)),
                                 motion=motion)
     nominal = nominal_grasp(model, obj, guess)

@@ -38,7 +38,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "(default per backend: vlr.trial.DEFAULT_SIGMA)")
     p.add_argument("--sigma-rot-deg", type=float, help="likelihood rotation scale [deg]")
     p.add_argument("--nominal-theta-deg", type=float, nargs="+", metavar="DEG",
-                   help="your guess of the grasp's joint angles, one per joint (every finger)")
+                   help="your guess of the grasp's joint angles: one per joint (every finger "
+                   "alike), or one per joint of every finger in the hand's order")
     p.add_argument("--prior-spread-deg", type=float, default=3.0,
                    help="prior std of the joint angles about the nominal grasp [deg]")
     p.add_argument("--rolling", action="store_true",
