@@ -25,10 +25,11 @@ def test_synthetic_known_hand_converges_to_the_truth():
 
 
 def test_synthetic_unknown_thumb_distal_stiffness():
-    # Measured (6k, seed 0, true 0.045 N m/rad): proximal 0.12 deg, stiffness error
-    # 0.024 N m/rad (the 60k sweep: 0.0044 +- 0.0037); the prior spans 0.0075-0.12.
+    # Measured (6k, seed 0, true 0.045 N m/rad; the world redraws this seed's truth twice, a
+    # grasp at a fold): criterion met at iteration 52, proximal 0.55 deg, stiffness error
+    # 0.0026 N m/rad (the 60k sweep: 0.0013 +- 0.0011); the prior spans 0.0075-0.12.
     r = _run(backend="synthetic", particles=6000, seed=0, unknowns=("stiffness:thumb.distal",),
-             true_stiffness={"thumb.distal": 0.045})
+             true_stiffness={"thumb.distal": 0.045}, max_iterations=60)
     assert r["converged"]
     assert r["errors"]["proximal_deg_mean"] < 1.0
     assert r["errors"]["stiffness"]["thumb.distal"] < 0.03
