@@ -117,16 +117,20 @@ def run(args: argparse.Namespace) -> int:
         nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg,
         rolling=args.rolling, exploration=args.exploration)
     bar = None
-    if not args.quiet:
-        from tqdm import tqdm
-
-        bar = tqdm(total=args.max_iterations, desc="identify", unit="it")
 
     def progress(rec) -> None:
-        if bar is not None:
-            bar.set_postfix(ci_deg=f"{rec.ci_deg:.2f}", ess=f"{rec.ess:.0f}")
-            if rec.iteration:
-                bar.update(1)
+        # The bar starts with the filter, so that a world that fails to open (a bad
+        # hardware config) prints its one-line error alone.
+        nonlocal bar
+        if args.quiet:
+            return
+        if bar is None:
+            from tqdm import tqdm
+
+            bar = tqdm(total=args.max_iterations, desc="identify", unit="it")
+        bar.set_postfix(ci_deg=f"{rec.ci_deg:.2f}", ess=f"{rec.ess:.0f}")
+        if rec.iteration:
+            bar.update(1)
 
     cloud = CloudRecorder(seed=args.seed)  # a small sample per iteration, for particles.png
     watchers: list = [cloud]
