@@ -353,7 +353,7 @@ class MotionModel:
         start = state.copy() if follow else None
         status, iters = self._solve(state, u, cfg, config is not None, u_from)
         if follow:
-            self._follow(state, start, u, u_from, cfg, config is not None, status, iters)
+            self._follow(state, start, u, u_from, cfg, status, iters)
         return status, iters
 
     def _solve(self, state: ParticleState, u: np.ndarray, cfg: MotionConfig, custom: bool,
@@ -384,7 +384,7 @@ class MotionModel:
         return status, iters
 
     def _follow(self, state: ParticleState, start: ParticleState, u: np.ndarray,
-                u_from: np.ndarray, cfg: MotionConfig, custom: bool, status: np.ndarray,
+                u_from: np.ndarray, cfg: MotionConfig, status: np.ndarray,
                 iters: np.ndarray) -> None:
         """Solve the particles whose one solve failed by a jump or no convergence again from
         `start`, in `cfg.follow_substeps` steps (`MotionConfig.follow_substeps`); those that
@@ -398,12 +398,11 @@ class MotionModel:
         # The steep stretch of a path near a fold takes more iterations per step than a
         # whole ordinary action (measured: 30 did not converge, 60 did, on 16 steps).
         cfg = replace(cfg, max_iter=2 * cfg.max_iter)
-        custom = True
         u_prev = u_from
         spent = np.zeros(len(idx), dtype=np.int32)
         for j in range(1, n + 1):
             target = u_from + (np.asarray(u, dtype=float) - u_from) * (j / n)
-            _, it = self._solve(sub, target, cfg, custom, u_prev)
+            _, it = self._solve(sub, target, cfg, True, u_prev)
             spent += it
             u_prev = target
         ok = sub.valid
