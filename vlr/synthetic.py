@@ -243,7 +243,8 @@ class SyntheticWorld:
             raise GraspError(
                 f"the synthetic grasp snapped through: joint {self.model.names[i]}.{k} "
                 f"turned {np.degrees(turn[i, k]):.0f} degrees on the action "
-                f"{np.round(delta * 1e3, 3).tolist()} mm, in {steps} steps as in one "
+                f"{np.round(delta * 1e3, 3).tolist()} mm"
+                f"{f', in {steps} steps as in one' if steps > 1 else ''} "
                 f"(snap_theta {np.degrees(self.config.snap_theta):.0f} degrees)")
         return trial
 
