@@ -113,3 +113,10 @@ def test_the_filter_follows_what_the_world_calls_continuous(modelo):
     status, _ = MotionModel(modelo, OBJ).solve(start, u2, u_from=u1)
     assert status[0] == 0
     np.testing.assert_allclose(start.theta, world.state.theta, atol=1e-9)
+
+
+@pytest.mark.parametrize("kw", [{"max_regrasps": -1}, {"probe_action": -1e-3},
+                                {"snap_theta": 0.0}])
+def test_bad_world_settings_are_named(kw):
+    with pytest.raises(ValueError, match=next(iter(kw))):
+        SyntheticConfig(**kw)

@@ -72,6 +72,14 @@ class SyntheticConfig:
     probe_action: float = 0.4e-3
     max_regrasps: int = 10
 
+    def __post_init__(self) -> None:
+        if not self.snap_theta > 0:
+            raise ValueError(f"snap_theta {self.snap_theta!r} rad must be > 0")
+        if not (np.isfinite(self.probe_action) and self.probe_action >= 0):
+            raise ValueError(f"probe_action {self.probe_action!r} m must be >= 0 (0: off)")
+        if not (isinstance(self.max_regrasps, int) and self.max_regrasps >= 0):
+            raise ValueError(f"max_regrasps {self.max_regrasps!r} must be an integer >= 0")
+
 
 @dataclass(frozen=True)
 class NominalGrasp:

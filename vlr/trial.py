@@ -54,9 +54,9 @@ class TrialSettings:
         nominal_theta_deg: the user's guess of the grasp's joint angles [deg] (what one sees
             looking at the hand): K angles for every finger alike, or N x K, finger by
             finger in the hand's order (a thumb that wraps a thin object); None: the
-            synthetic world's
-            generic guess (vlr.synthetic.SyntheticConfig.grasp_theta). The prior is the nominal
-            hand's equilibrium from there (vlr.synthetic.nominal_grasp).
+            synthetic world's generic guess (vlr.synthetic.SyntheticConfig.grasp_theta).
+            The prior is the nominal hand's equilibrium from there, in the filter's own
+            motion model (vlr.synthetic.nominal_grasp).
         prior_spread_deg: prior std of the joint angles about the nominal grasp [deg].
         rolling: rolling contacts in the filter's motion model (vlr.surface; measured by
             `vlr gap`, docs/RESULTS.md), and in the synthetic world's, which is that model.
@@ -218,7 +218,7 @@ def _true_stiffness(settings: TrialSettings, model) -> dict[tuple[int, int], flo
 def open_world(settings: TrialSettings) -> World:
     """Open the trial's world (module docstring). The caller closes it."""
     from vlr.kinematics import HandModel
-    from vlr.motion import ObjectParams
+    from vlr.motion import MotionConfig, ObjectParams
     from vlr.spec import load_hand, load_object
     from vlr.synthetic import SyntheticConfig, SyntheticWorld, nominal_grasp
 
@@ -227,8 +227,6 @@ def open_world(settings: TrialSettings) -> World:
     model = HandModel.from_spec(hand_spec)
     check_unknowns(settings, model)  # before a backend opens (and must be closed)
     obj = ObjectParams.from_spec(obj_spec)
-    from vlr.motion import MotionConfig
-
     # The nominal guess is the filter's own model's equilibrium: with rolling contacts the
     # pads roll while the grasp settles, and the distal joints settle 25-30 degrees from the
     # pinned equilibrium (measured, synthetic seed 0): a pinned guess would centre the
