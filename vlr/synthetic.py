@@ -53,8 +53,9 @@ class SyntheticConfig:
             this much (2 N actions) [m]; one that snaps is a grasp at a fold, and the world
             grasps again (as an experimenter re-places an object that does not sit stably).
             0 turns the probe off. The default is the largest exploratory action. Probing
-            every sign combination instead (2^N actions) rejected 1-3 of 6 NH1 draws per
-            seed, including draws that then ran 60 random actions without a snap.
+            every sign combination instead (2^N actions) flagged most NH1 draws (all of
+            seed 1's first six), among them draws that then ran 100 random actions without
+            a snap (NH1 seed 1's first draw, docs/RESULTS.md 1).
         max_regrasps: draws before `grasp` gives up with a GraspError.
     """
 
