@@ -54,8 +54,8 @@ class SyntheticConfig:
             grasps again (as an experimenter re-places an object that does not sit stably).
             0 turns the probe off. The default is the largest exploratory action. Probing
             every sign combination instead (2^N actions) flagged most NH1 draws (all of
-            seed 1's first six), among them draws that then ran 100 random actions without
-            a snap (NH1 seed 1's first draw, docs/RESULTS.md 1).
+            seed 1's first six), among them draws that then ran to convergence without a
+            snap (NH1 seed 1's first draw: 49 actions, docs/RESULTS.md 1).
         max_regrasps: draws before `grasp` gives up with a GraspError.
     """
 
