@@ -206,8 +206,8 @@ def build_object(obj: ObjectSpec) -> mjcf.RootElement:
         body.add("geom", name="shaft", type="capsule", size=[sr, sl / 2],
                  pos=[half + sl / 2, 0, c + rad], quat=[math.sqrt(0.5), 0, math.sqrt(0.5), 0],
                  **col)
-    elif obj.shape == "cylinder" and ext.get("hollow"):
-        _hollow_cup(body, obj, col)
+    elif obj.shape == "cylinder" and ext.get("upright"):
+        _upright_cup(body, obj, col)
     elif obj.shape == "cylinder":
         rad, half = obj.size
         body.add("geom", name="body", type="cylinder", size=[rad, half],
@@ -243,19 +243,49 @@ def _object_inertia(obj: ObjectSpec) -> list[float]:
     return _box_inertia(m, *(2 * s))
 
 
-def _hollow_cup(body, obj: ObjectSpec, col: dict, segments: int = 16) -> None:
-    """An open cup as a bottom disc and a ring of wall boxes (MuJoCo collides convex hulls)."""
-    rad, half = obj.size
-    wall = obj.extras.get("wall", 0.0025)
-    c = TAG_CARD_THICKNESS
-    body.add("geom", name="bottom", type="cylinder", size=[rad, wall / 2],
-             pos=[0, 0, c + wall / 2], **col)
-    seg_half = rad * math.tan(math.pi / segments) * 1.05
+def cup_dimensions(obj: ObjectSpec) -> dict[str, float]:
+    """An upright cup's dimensions [m] (`_upright_cup`): rim and bottom outer radii, outer
+    height, wall and bottom thickness, taper [rad], and heights along -z_O from O (the tag
+    face, on the inside bottom): `floor` (the outer bottom face, at +`floor_depth` along
+    z_O) and `rim` (the rim, at -`rim_height` along z_O)."""
+    e = obj.extras
+    rim_r, half = obj.size
+    taper = math.radians(float(e.get("taper_deg", 6.0)))
+    height = 2 * half
+    bottom = float(e.get("bottom", 0.0025))
+    floor_depth = TAG_CARD_THICKNESS + bottom
+    return {"rim_radius": rim_r, "bottom_radius": rim_r - height * math.tan(taper),
+            "height": height, "wall": float(e.get("wall", 0.002)), "bottom": bottom,
+            "taper": taper, "floor_depth": floor_depth, "rim_height": height - floor_depth}
+
+
+def _upright_cup(body, obj: ObjectSpec, col: dict, segments: int = 24) -> None:
+    """An open cup standing on its bottom, the tag on the INSIDE bottom seen through the
+    opening: a bottom disc and a ring of wall boxes (MuJoCo collides convex hulls) that rise
+    towards -z_O (the camera) and flare out by `extras.taper_deg`, so that cups nest and a
+    cup dropped into a larger one slides to its axis. `size`: (rim outer radius, half the
+    outer height)."""
+    d = cup_dimensions(obj)
+    rb, rt, h, w, t = (d["bottom_radius"], d["rim_radius"], d["height"], d["wall"],
+                       d["taper"])
+    z0 = d["floor_depth"]                        # the outer bottom face, along +z_O
+    body.add("geom", name="bottom", type="cylinder", size=[rb, d["bottom"] / 2],
+             pos=[0, 0, z0 - d["bottom"] / 2], **col)
+    # Each wall segment: a box leaning out by the taper, its outer face on the cone. Its
+    # width is the rim's chord (a little over): the ring is closed at the rim, and below it
+    # the boxes overlap outward only (an extended edge of a convex polygon lies outside it).
+    seg_half = rt * math.tan(math.pi / segments) * 1.02
+    length = h / math.cos(t)
+    r_mid = 0.5 * (rb + rt) - 0.5 * w / math.cos(t)
+    q_tilt = (math.cos(-t / 2), 0.0, math.sin(-t / 2), 0.0)   # about y: the top leans out
     for k in range(segments):
         a = 2 * math.pi * k / segments
-        body.add("geom", name=f"wall{k}", type="box", size=[wall / 2, seg_half, half],
-                 pos=[(rad - wall / 2) * math.cos(a), (rad - wall / 2) * math.sin(a),
-                      c + half], quat=[math.cos(a / 2), 0, 0, math.sin(a / 2)], **col)
+        q = np.zeros(4)
+        mujoco.mju_mulQuat(q, np.array([math.cos(a / 2), 0.0, 0.0, math.sin(a / 2)]),
+                           np.array(q_tilt))
+        body.add("geom", name=f"wall{k}", type="box", size=[w / 2, seg_half, length / 2],
+                 pos=[r_mid * math.cos(a), r_mid * math.sin(a), z0 - h / 2],
+                 quat=q.tolist(), **col)
 
 
 def _add_tag(root: mjcf.RootElement, body, obj: ObjectSpec) -> None:

@@ -40,12 +40,13 @@ from sim.model import (  # noqa: E402
     build_hand,
     build_object,
     build_scene,
+    cup_dimensions,
 )
 from vlr.hand import ApplyReport, GraspError  # noqa: E402
 from vlr.spec import HandSpec, ObjectSpec, load_object  # noqa: E402
 
 __all__ = ["plate_mount", "build_maze_scene", "MazeHand", "CUPS", "build_cups_scene",
-           "CupsHand", "cup_rim_depth"]
+           "CupsHand", "cup_floor_depth"]
 
 MARBLE_PARK = (0.30, 0.0, 0.02)     # m, world: off the hand, out of every view
 MARBLE_COLOR = (0.15, 0.35, 0.85, 1.0)
@@ -194,9 +195,10 @@ TABLE_COLOR = (0.55, 0.45, 0.35, 1.0)
 SUPPORT_COLOR = (0.30, 0.30, 0.30, 1.0)
 
 
-def cup_rim_depth(obj: ObjectSpec) -> float:
-    """The rim's distance from the tag face along z_O [m] (card + wall height)."""
-    return TAG_CARD_THICKNESS + 2 * obj.size[1]
+def cup_floor_depth(obj: ObjectSpec) -> float:
+    """How far the cup's outer bottom face lies from its tag along z_O [m]: the height of
+    O above the table when the cup stands level (`sim.model.cup_dimensions`)."""
+    return cup_dimensions(obj)["floor_depth"]
 
 
 def build_cups_scene(hand: HandSpec, obj: ObjectSpec, cups: Sequence[ObjectSpec], *,
@@ -228,8 +230,8 @@ def build_cups_scene(hand: HandSpec, obj: ObjectSpec, cups: Sequence[ObjectSpec]
         croot = build_object(spec)
         croot.model = spec.name
         frame = root.worldbody.attach(croot)
-        frame.pos = [0.12 * k, 0.35, cup_rim_depth(spec)]
-        frame.quat = list(PALM_DOWN)            # upside down: the tag on top
+        frame.pos = [0.12 * k, 0.35, cup_floor_depth(spec)]
+        frame.quat = list(PALM_DOWN)            # upright: z_O (tag to bottom) points down
         frame.add("freejoint", name="object_free")
         root.equality.add("weld", name=f"{spec.name}_hold", body1=f"{spec.name}/object",
                           body2="palm", solref=[0.01, 1], active=False)

@@ -316,8 +316,10 @@ class HandTaskEnv(gym.Env):
         return pose_vector(pos, rot)
 
     def _info(self) -> dict[str, Any]:
-        info: dict[str, Any] = {"commands": self.commands, "tag_seen": self.moves[-1].observation
-                                is not None, "filter_lost": self.filter_lost,
+        # No moves yet when a pick inside a step failed (cups): no tag seen since.
+        seen = bool(self.moves) and self.moves[-1].observation is not None
+        info: dict[str, Any] = {"commands": self.commands, "tag_seen": seen,
+                                "filter_lost": self.filter_lost,
                                 "grasp_lost": self.grasp_lost}
         info.update(self._task_info())
         if self.backend == "sim" and self.has_truth:

@@ -51,13 +51,18 @@ from vlr.hand import GraspError
 from vlr.motion import rotvec_to_matrix
 from vlr.observation import rotation_angle
 
-__all__ = ["TARGET_XY", "PICK_XY", "PICK_HEIGHT", "CupStackingEnv"]
+__all__ = ["TARGET_XY", "PICK_XY", "PICK_HEIGHT", "CupStackingEnv", "nested"]
 
 TARGET_XY = (0.0, 0.0)                    # m, world: the target cup1
 PICK_XY = ((0.13, 0.0), (0.26, 0.0), (0.39, 0.0), (0.52, 0.0))   # cups 2..5 on the table
-PICK_HEIGHT = 0.07      # m, palm to tag at the pick: the sim's fingertip grasp of a cup
-                        # holds there (at the cup specs' 0.055 the proximal links touch)
+PICK_HEIGHT = 0.145     # m, palm to tag (the inside bottom) at the pick: the pads touch
+                        # the wall 15-20 mm below the rim (at 0.16 they touch the rim)
 CARRY_CLEARANCE = 0.05  # m above the stack while the arm carries a cup
+GRIP_BELOW_RIM = 0.015  # m: about where the pads touch the wall at PICK_HEIGHT
+TIP_BEYOND_PAD = 3e-3   # m: the distal link's end below its pad sphere, and a margin
+NESTED_OFFSET = 3e-3    # m: a nested cup's bottom within this of the lower cup's axis
+NESTED_TILT_DEG = 5.0   # and its axis within this of the lower cup's axis (2 mm of play
+                        # between walls allows about 4 degrees)
 CUPS = ("cup1", "cup2", "cup3", "cup4", "cup5")
 
 
@@ -78,8 +83,13 @@ class CupStackingEnv(HandTaskEnv):
         tolerance_mm, tolerance_deg: a cup's in-hand target counts as reached within both.
         steps_per_cup: move budget of the in-hand correction of one cup.
         clearance: the arm stops the cup's lowest rim point this far above the stack [m].
-        command_band: as `HandTaskEnv`'s (its default: with the palm down, gravity pulls
-            the cup out of the grasp, and a 0.4 mm release lost a fingertip on seed 0).
+        command_band: as `HandTaskEnv`'s. Pulling is what tilts a cup held by its wall:
+            0.4 mm of one side tendon turns it about 1.6 degrees, and the table tilts are
+            5-10 degrees, so the band pulls up to 1.2 mm; releasing a side tendon by 0.5 mm
+            loses its fingertip, so it releases 0.25 mm at most.
+        squeeze: as `HandTaskEnv`'s: 0.3 mm on every tendon before the correction, so
+            that one finger's pull does not unload the opposite fingertip (without it, the
+            1.2 mm band lost a fingertip on seeds 0 and 1).
     """
 
     object_name = "cup2"
@@ -91,13 +101,14 @@ class CupStackingEnv(HandTaskEnv):
                  n_cups: int = 4, tilt_deg: tuple[float, float] = (5.0, 10.0),
                  tolerance_mm: float = 0.3, tolerance_deg: float = 0.3,
                  steps_per_cup: int = 20, clearance: float = 0.002,
-                 command_band: tuple[float, float] = (0.25e-3, 0.4e-3),
-                 **kwargs: Any) -> None:
+                 command_band: tuple[float, float] = (0.25e-3, 1.2e-3),
+                 squeeze: float = 0.3e-3, **kwargs: Any) -> None:
         if backend == "hardware":
             raise UserError("cup stacking needs an arm (a wrist pose command, palm down, "
                             "over the cups): this project has no arm driver, so the task "
                             "runs in the sim only")
-        super().__init__(backend, render_mode, command_band=command_band, **kwargs)
+        super().__init__(backend, render_mode, command_band=command_band, squeeze=squeeze,
+                         **kwargs)
         if not isinstance(n_cups, int) or not 1 <= n_cups <= 4:
             raise ValueError(f"n_cups {n_cups!r} must be 1..4")
         lo, hi = (float(v) for v in tilt_deg)
@@ -136,9 +147,9 @@ class CupStackingEnv(HandTaskEnv):
         self.layout = {}
         for k, name in enumerate(CUPS):
             spec = hand.cups[name]
-            r = spec.size[0]
-            depth = _rim_depth(spec)
-            down = np.diag([1.0, -1.0, -1.0])          # upside down: z_O points down
+            dims = _dims(spec)
+            r = dims["bottom_radius"]
+            down = np.diag([1.0, -1.0, -1.0])          # upright: z_O (tag to bottom) down
             if k == 0:
                 xy, tilt, phi, yaw = np.array(TARGET_XY), 0.0, 0.0, 0.0
             else:
@@ -150,13 +161,13 @@ class CupStackingEnv(HandTaskEnv):
             d = np.array([np.cos(phi), np.sin(phi), 0.0])      # the raised side
             tilt_rot = rotvec_to_matrix(-np.cross(np.array([0.0, 0.0, 1.0]), d) * tilt)
             rot = tilt_rot @ rotvec_to_matrix(np.array([0.0, 0.0, yaw])) @ down
-            rim_centre = np.array([xy[0], xy[1], r * np.sin(tilt)])
-            poses[name] = (rim_centre - depth * rot[:, 2], _quat(rot))
+            bottom_centre = np.array([xy[0], xy[1], r * np.sin(tilt)])
+            poses[name] = (bottom_centre - dims["floor_depth"] * rot[:, 2], _quat(rot))
             if k == 0:
                 supports[name] = np.array([0.6, 0.45, 0.005])   # not needed: parked
             else:
                 sup = np.array([xy[0], xy[1], 0.0]) + d * r * np.cos(tilt)
-                sup[2] = 2 * r * np.sin(tilt) - 0.005       # block top under the rim
+                sup[2] = 2 * r * np.sin(tilt) - 0.005       # block top under the bottom
                 supports[name] = sup
             self.layout[name] = {"tilt_deg": float(np.degrees(tilt)),
                                  "direction_deg": float(np.degrees(phi)),
@@ -168,27 +179,43 @@ class CupStackingEnv(HandTaskEnv):
 
     def _go_pick(self) -> None:
         """Take the open hand over the current cup's nominal place and lower it to the
-        pick height (the arm knows where the cups stand, not how they tilt)."""
+        pick height (the arm knows where the cups stand, not how they tilt); then centre the
+        palm on the cup's axis where the pads will touch, as the camera sees the cup (a tilt
+        moves the rim of the smallest cup far enough that a finger misses it)."""
         hand = self.hand
         name = CUPS[self.cup]
         spec = hand.cups[name]
         x, y = PICK_XY[self.cup - 1]
         pos, _ = hand.arm_pose()
-        top = self._stack_top() + _rim_depth(hand.cups[CUPS[0]]) + 0.15
+        top = self._stack_rim() + PICK_HEIGHT
         hand.move_arm([pos[0], pos[1], max(pos[2], top)])
         hand.move_arm([x, y, max(pos[2], top)])
-        hand.move_arm([x, y, _rim_depth(spec) + PICK_HEIGHT], speed=0.1)
+        z = _dims(spec)["floor_depth"] + PICK_HEIGHT
+        hand.move_arm([x, y, z], speed=0.1)
         hand.select(name)
+        obs = self._observe()
+        if obs is not None:
+            grip = np.asarray(obs.position) + np.asarray(obs.rotation) @ np.array(
+                [0.0, 0.0, -(_dims(spec)["rim_height"] - GRIP_BELOW_RIM)])
+            _, wrist_rot = hand.arm_pose()
+            shift = wrist_rot @ np.array([grip[0], grip[1], 0.0])
+            hand.move_arm([x + shift[0], y + shift[1], z], speed=0.05)
 
-    def _stack_top(self) -> float:
-        """Height of the stack's top face (the upturned bottom of its last cup) [m]."""
-        return float(sum(2 * self.hand.cups[CUPS[k]].size[1] for k in range(self.cup)))
+    def _rest_height(self, k: int) -> float:
+        """Height of cup k's O (its tag, on its inside bottom) when it sits nested in the
+        stack: each cup's bottom rests on the tag card of the cup below [m]."""
+        return float(sum(_dims(self.hand.cups[CUPS[j]])["floor_depth"] for j in range(k + 1)))
+
+    def _stack_rim(self) -> float:
+        """Height of the stack's top rim (the last placed cup's, or the target's) [m]."""
+        top = self.cup - 1
+        return self._rest_height(top) + _dims(self.hand.cups[CUPS[top]])["rim_height"]
 
     # ------------------------------------------------------------------ task hooks
     def _start_task(self) -> None:
         obs = self.observation
         rot = np.asarray(obs.rotation, dtype=float)
-        n = rot[:, 2]                      # the cup's axis, tag to rim
+        n = rot[:, 2]                      # the cup's axis, rim to tag (down the cup)
         z = np.array([0.0, 0.0, 1.0])      # the palm normal: level when the palm faces down
         axis = np.cross(n, z)
         s = np.linalg.norm(axis)
@@ -246,16 +273,18 @@ class CupStackingEnv(HandTaskEnv):
         spec = hand.cups[name]
         pos, rot = self.goal
         wrist_pos, wrist_rot = hand.arm_pose()
-        # Where the target in-hand pose would put the tag: on the stack's axis, the rim on
-        # the stack top. The camera's view of the cup sets how far above to stop: its
-        # lowest rim point `clearance` above the top.
-        o = self.observation
-        tilt = float(np.arccos(np.clip(np.asarray(o.rotation)[2, 2], -1, 1)))
-        drop = self.clearance + spec.size[0] * np.sin(tilt)
-        tag = np.array([TARGET_XY[0], TARGET_XY[1],
-                        self._stack_top() + _rim_depth(spec) + drop])
+        # Where the target in-hand pose would put the tag: on the stack's axis, the cup
+        # sitting nested in the one below. The fingers wrap the wall below the rim, so the
+        # hand lets go higher: where the identified VLR's fingertips clear the rim below by
+        # `clearance`, and the cup drops the rest of the way, its walls guiding it in.
+        tips = self._fingertip_depth()
+        rim = self._stack_rim()
+        tag_z = max(self._rest_height(self.cup) + self.clearance,
+                    rim + self.clearance + tips - pos[2])
+        tag = np.array([TARGET_XY[0], TARGET_XY[1], tag_z])
         wrist = tag - wrist_rot @ pos
-        carry = self._stack_top() + _rim_depth(spec) + pos[2] + CARRY_CLEARANCE
+        below = max(tips, pos[2] + _dims(spec)["floor_depth"])   # lowest point, palm frame
+        carry = rim + below + CARRY_CLEARANCE
         hand.move_arm([wrist_pos[0], wrist_pos[1], max(carry, wrist_pos[2])])
         hand.move_arm([wrist[0], wrist[1], max(carry, wrist_pos[2])])
         hand.move_arm(wrist, speed=0.05)
@@ -278,6 +307,17 @@ class CupStackingEnv(HandTaskEnv):
         hand.move_arm([up[0], up[1], up[2] + 0.05], speed=0.1)
         self.cup += 1
 
+    def _fingertip_depth(self) -> float:
+        """How far below the palm the fingertips reach [m], from the identified VLR: the
+        deepest pad sphere's bottom over the fingers (95th percentile over particles), plus
+        the distal link's end beyond it."""
+        from vlr.kinematics import contact_points
+
+        st, model = self.pf.state, self.pf.model
+        centres = contact_points(model, st.theta, np.zeros_like(st.normals), st.segments)
+        deepest = np.max(centres[..., 2] + model.pad_radius[None, :], axis=1)
+        return float(np.percentile(deepest, 95)) + TIP_BEYOND_PAD
+
     def _task_info(self) -> dict[str, Any]:
         done = self.cup > self.n_cups
         pos_err, rot_err = (0.0, 0.0) if done else self._camera_errors()
@@ -290,23 +330,10 @@ class CupStackingEnv(HandTaskEnv):
 
     # ------------------------------------------------------------------ results
     def stacked(self) -> list[bool]:
-        """Ground truth (sim): for each placed cup, whether it rests on the one below: its
-        rim's centre within (r_below - r) of the lower cup's axis, its axis within 3 degrees
-        of vertical and its rim within 3 mm of the lower cup's top."""
-        hand = self.hand
-        out = []
-        for k in range(1, 1 + len(self.records)):
-            lo, hi = hand.cups[CUPS[k - 1]], hand.cups[CUPS[k]]
-            p0, r0 = hand.cup_pose(CUPS[k - 1])
-            p1, r1 = hand.cup_pose(CUPS[k])
-            top0 = p0 + r0[:, 2] * _card(lo)            # the lower cup's bottom face
-            rim1 = p1 + r1[:, 2] * _rim_depth(hi)       # this cup's rim centre
-            off = float(np.linalg.norm((rim1 - top0)[:2]))
-            tilt = float(np.degrees(np.arccos(np.clip(-r1[2, 2], -1, 1))))
-            ok = (off <= lo.size[0] - hi.size[0] and tilt <= 3.0
-                  and abs(rim1[2] - top0[2]) <= 3e-3)
-            out.append(bool(ok))
-        return out
+        """Ground truth (sim): for each placed cup, whether it is nested in the one below
+        (`nested`)."""
+        return [nested(self.hand, CUPS[k - 1], CUPS[k])
+                for k in range(1, 1 + len(self.records))]
 
     def metrics(self) -> dict[str, Any]:
         """errors.position_mm_mean / rotation_deg_mean (at release, ground truth in the
@@ -382,13 +409,23 @@ class CupStackingEnv(HandTaskEnv):
         return super().render()
 
 
-def _rim_depth(spec) -> float:
-    from sim.scenes import cup_rim_depth
+def nested(hand, lower: str, upper: str) -> bool:
+    """Ground truth (sim): whether cup `upper` sits nested in cup `lower`: its tag (the
+    centre of its inside bottom) within `NESTED_OFFSET` of the lower cup's axis and inside
+    that cup (between its floor and rim), its axis within `NESTED_TILT_DEG` of the lower
+    cup's."""
+    lo = _dims(hand.cups[lower])
+    p0, r0 = hand.cup_pose(lower)
+    p1, r1 = hand.cup_pose(upper)
+    rel = r0.T @ (p1 - p0)                  # in the lower cup's frame O
+    off = float(np.linalg.norm(rel[:2]))
+    height = -rel[2]                        # above the lower cup's tag, up its axis
+    tilt = float(np.degrees(np.arccos(np.clip(r0[:, 2] @ r1[:, 2], -1, 1))))
+    return bool(off <= NESTED_OFFSET and tilt <= NESTED_TILT_DEG
+                and 0.0 < height < lo["rim_height"])
 
-    return cup_rim_depth(spec)
 
+def _dims(spec) -> dict[str, float]:
+    from sim.model import cup_dimensions
 
-def _card(spec) -> float:
-    from sim.model import TAG_CARD_THICKNESS
-
-    return TAG_CARD_THICKNESS
+    return cup_dimensions(spec)
