@@ -3,7 +3,7 @@
 A trial opens a world (the synthetic world of `vlr.synthetic`, or a backend registered under
 `vlr.backends`: sim, hardware), runs the self-identification loop (`vlr.identify`) on the
 nominal hand, scores it against ground truth where the world has one (scoring only) and
-returns the `result.json` summary (`vlr.commands.identify.summarize`).
+returns the `result.json` summary (`vlr.results.summarize`).
 
 Settings are a frozen dataclass with a dict form, so that sweeps can write them next to each
 result and rebuild the table from files alone.
@@ -332,8 +332,8 @@ def identify_trial(settings: TrialSettings, progress: Callable | None = None,
 
     `observe_through(world)` may return another observer to use (the live view wraps the
     camera's with one that also draws it)."""
-    from vlr.commands.identify import summarize
     from vlr.identify import identify
+    from vlr.results import summarize
 
     t0 = time.perf_counter()
     w = open_world(settings)
@@ -365,7 +365,7 @@ def run_trial(settings: TrialSettings, out: Path | None = None,
               progress: Callable | None = None, watch: Callable | None = None) -> dict:
     """Run one trial (`identify_trial`); write its files into `out` if given; return the
     result summary."""
-    from vlr.commands.identify import write_outputs
+    from vlr.results import write_outputs
 
     run = identify_trial(settings, progress, watch)
     if out is not None:

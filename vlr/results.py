@@ -1,0 +1,107 @@
+"""What one identification trial writes: the `result.json` summary (errors against the
+truth at the final iteration, coverage, timing), `history.npz` and `convergence.png`. Shared
+by `vlr identify`, `vlr sweep` and the tasks through `vlr.trial`."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["summarize", "write_outputs"]
+
+
+def summarize(result, model, args, wall: float, final_truth=None) -> dict:
+    """The result.json content: errors against the truth at the final iteration.
+
+    `args` names the trial (backend, object, hand, particles, seed, unknown)."""
+    n, k = model.n_fingers, model.n_joints
+    out: dict = {"backend": args.backend, "object": args.object, "hand": args.hand,
+                 "particles": args.particles, "seed": args.seed, "unknowns": args.unknown,
+                 "converged": bool(result.converged), "iterations": int(result.iterations),
+                 "converged_at": result.converged_at,
+                 "estimates": {name: vars(e) for name, e in result.theta.items()},
+                 "unknown_estimates": {name: vars(e) for name, e in result.unknowns.items()},
+                 "timing": {"filter_s_per_iteration_median": float(np.median(result.seconds)),
+                            "wall_s": wall}}
+    if result.scores:
+        s = result.scores[-1]
+        err = s.theta_error_deg.reshape(n, k)
+        errors = {"proximal_deg_mean": float(err[:, 0].mean()),
+                  "distal_deg_mean": float(err[:, 1:].mean()),
+                  "proximal_deg": dict(zip(model.names, err[:, 0].tolist(), strict=True))}
+        if final_truth is not None:
+            from vlr.kinematics import contact_in_distal
+
+            c_true = contact_in_distal(model, final_truth.normals[None],
+                                       final_truth.segments[None])[0]
+            err_c = np.linalg.norm(result.contacts - c_true, axis=-1) * 1e3
+            if np.all(np.isfinite(err_c)):  # a finger without contact has no contact error
+                errors["contact_mm_mean"] = float(err_c.mean())
+        lengths, stiff = {}, {}
+        for spec, e in s.unknown_error.items():
+            kind, _, rest = spec.partition(":")
+            if kind == "length":  # a finger's mean over its unknown lengths
+                lengths.setdefault(rest.split(".")[0], []).append(abs(e) * 1e3)
+                errors.setdefault("link_length_mm_by_joint", {})[rest] = abs(e) * 1e3
+            elif kind == "stiffness":
+                stiff[rest] = abs(e)
+        if lengths:
+            errors["link_length_mm"] = {f: float(np.mean(v)) for f, v in lengths.items()}
+        if stiff:
+            errors["stiffness"] = stiff
+        out["errors"] = errors
+        covered = list(s.theta_covered) + list(s.unknown_covered.values())
+        out["coverage"] = float(np.mean(covered))
+    return out
+
+
+def write_outputs(out: Path, result, summary: dict, model, truths: list | None = None) -> None:
+    """result.json, history.npz and convergence.png, each written atomically."""
+    from vlr.io import atomic_path, write_json_atomic
+
+    out.mkdir(parents=True, exist_ok=True)
+    n, k = model.n_fingers, model.n_joints
+    post = [r.posterior or r.prior for r in result.history]
+    hist = {"iteration": np.array([r.iteration for r in result.history]),
+            "mean": np.array([p.mean for p in post]),
+            "low": np.array([p.low for p in post]),
+            "high": np.array([p.high for p in post]),
+            "ess": np.array([r.ess for r in result.history]),
+            "ci_deg": np.array([r.ci_deg for r in result.history]),
+            "command": np.array([r.command for r in result.history]),
+            "seconds": np.array(result.seconds)}
+    if result.scores:
+        hist["theta_error_deg"] = np.array([s.theta_error_deg for s in result.scores])
+    if truths:
+        hist["truth_theta"] = np.array([t.theta.ravel() for t in truths])
+    with atomic_path(out / "history.npz") as tmp:
+        np.savez_compressed(tmp, **hist)
+    _plot(out / "convergence.png", hist, model, n, k)
+    write_json_atomic(out / "result.json", summary)
+
+
+def _plot(path: Path, hist: dict, model, n: int, k: int) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    it = hist["iteration"]
+    fig, axes = plt.subplots(1, n, figsize=(4 * n, 3.2), squeeze=False)
+    for i, name in enumerate(model.names):
+        ax = axes[0, i]
+        j = i * k
+        ax.fill_between(it, np.degrees(hist["low"][:, j]), np.degrees(hist["high"][:, j]),
+                        alpha=0.3, label="95% interval")
+        ax.plot(it, np.degrees(hist["mean"][:, j]), label="estimate")
+        if "truth_theta" in hist:
+            ax.plot(it, np.degrees(hist["truth_theta"][:, j]), "k--", label="ground truth")
+        ax.set_title(f"{name} proximal")
+        ax.set_xlabel("iteration")
+        ax.set_ylabel("angle [deg]")
+    axes[0, 0].legend(loc="best", fontsize=8)
+    fig.tight_layout()
+    from vlr.plots import _save
+
+    _save(fig, path)  # atomically (vlr.io.atomic_path), and the figure closed
