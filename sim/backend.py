@@ -175,38 +175,12 @@ class SimHand:
         release the helper weld, settle, and check the fingertip grasp (GraspError if none).
         """
         self._reset_state()
-        opts = self.options
-        target = np.array([opts.grasp_tension[0] if s == "thumb" else opts.grasp_tension[1]
-                           for s in self._slots])
-        dt = self.model.opt.timestep
-        du = opts.close_speed * dt
-        done = np.zeros(len(self._slots), bool)
-        for _ in range(int(3.0 / dt)):
-            tension = self.static_tensions()
-            done |= tension >= target
-            if done.all():
-                break
-            self._u = np.where(done, self._u, self._u + du)
-            if np.any(self._u > COMMAND_RANGE[1]):
-                break
-            self._set_ctrl(self._u)
-            mujoco.mj_step(self.model, self.data)
-        if not done.all():
-            names = [s for s, d in zip(self._slots, done, strict=True) if not d]
-            raise GraspError(f"{self._object.name}: fingers {names} never reached their grasp "
-                             f"tension (commands {np.round(self._u * 1e3, 2).tolist()} mm)")
+        target = self._close_to_tension()
         self._settle()
         self.data.eq_active[self._weld] = 0
         settled = self._settle()
-        # Fingers keep wrapping after the first touch, which relaxes the line: top the
-        # tensions up to the targets, as a current-controlled grasp on the real hand would.
-        for _ in range(6):
-            short = target - self.static_tensions()
-            if np.all(np.abs(short) < 0.05 * target):
-                break
-            step = np.clip(short / self._true.tendon_stiffness, -MAX_STEP, MAX_STEP)
-            self._ramp_to(self._u + step)
-            settled = self._settle()
+        topped = self._top_up_tensions(target)
+        settled = settled if topped is None else topped
         held, message = self._grasp_status()
         from sim.truth import contact_summary
 
@@ -219,6 +193,44 @@ class SimHand:
                              f"{message}")
         self._grasped = True
         return ApplyReport(commands=self.commands, settled=settled, grasp_held=True)
+
+    def _close_to_tension(self) -> np.ndarray:
+        """Close each tendon at `close_speed` until its static tension reaches the grasp
+        tension (thumb, others); GraspError if one never does. Returns the targets [N]."""
+        opts = self.options
+        target = np.array([opts.grasp_tension[0] if s == "thumb" else opts.grasp_tension[1]
+                           for s in self._slots])
+        dt = self.model.opt.timestep
+        du = opts.close_speed * dt
+        done = np.zeros(len(self._slots), bool)
+        for _ in range(int(3.0 / dt)):
+            done |= self.static_tensions() >= target
+            if done.all():
+                break
+            self._u = np.where(done, self._u, self._u + du)
+            if np.any(self._u > COMMAND_RANGE[1]):
+                break
+            self._set_ctrl(self._u)
+            mujoco.mj_step(self.model, self.data)
+        if not done.all():
+            names = [s for s, d in zip(self._slots, done, strict=True) if not d]
+            raise GraspError(f"{self._object.name}: fingers {names} never reached their grasp "
+                             f"tension (commands {np.round(self._u * 1e3, 2).tolist()} mm)")
+        return target
+
+    def _top_up_tensions(self, target: np.ndarray) -> bool | None:
+        """Fingers keep wrapping after the first touch, which relaxes the line: top the
+        tensions up to `target`, as a current-controlled grasp on the real hand would.
+        Returns whether the last settle was quiet (None if nothing was needed)."""
+        settled = None
+        for _ in range(6):
+            short = target - self.static_tensions()
+            if np.all(np.abs(short) < 0.05 * target):
+                break
+            step = np.clip(short / self._true.tendon_stiffness, -MAX_STEP, MAX_STEP)
+            self._ramp_to(self._u + step)
+            settled = self._settle()
+        return settled
 
     def apply(self, delta: np.ndarray) -> ApplyReport:
         """Ramp the tendon commands by `delta` [m] (one per finger), then settle."""

@@ -10,10 +10,11 @@ the task and the sim only builds it.
 
 `CupsHand` is a `SimHand` on an arm: the palm rides on three servoed slide joints (the wrist
 of an arm with known kinematics, moved by `move_arm`; its orientation is fixed), palm
-facing down over a table with five upside-down cups (models/objects/cup1..5.yaml), their
-tags on top where the palm camera sees them when the hand comes from above. Each cup but
-the target rests tilted on a small support block (a 12 x 20 mm block whose height sets the
-tilt), so its pose in the hand after a pick is unknown. The held object is whichever cup
+facing down over a table with five upright nesting cups (models/objects/cup1..5.yaml), their
+tags on the inside bottom where the palm camera sees them through the opening when the hand
+comes from above. Each cup but the target rests tilted on a small support block under one
+side of its bottom (a 12 x 20 mm block whose height sets the tilt), so its pose in the hand
+after a pick is unknown. The held object is whichever cup
 `select` names; `grasp` picks it where it stands (no reset: the rest of the table keeps
 its state).
 
@@ -33,7 +34,7 @@ import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from dm_control import mjcf  # noqa: E402
 
-from sim.backend import COMMAND_RANGE, MAX_STEP, SimHand, SimOptions  # noqa: E402
+from sim.backend import SimHand, SimOptions  # noqa: E402
 from sim.model import (  # noqa: E402
     SOLREF,
     TAG_CARD_THICKNESS,
@@ -249,7 +250,7 @@ def build_cups_scene(hand: HandSpec, obj: ObjectSpec, cups: Sequence[ObjectSpec]
 
 
 class CupsHand(SimHand):
-    """A `SimHand` on an arm over a table of upside-down cups (module docstring).
+    """A `SimHand` on an arm over a table of upright nesting cups (module docstring).
 
     Args:
         cups: the cup specs (names or ObjectSpec), largest (the target) first.
@@ -356,31 +357,9 @@ class CupsHand(SimHand):
         until it reaches its grasp tension (as `SimHand.grasp`, but without resetting the
         scene or a helper weld: the table and the support hold the cup while the fingers
         close), top the tensions up, lift the arm by `lift` and settle."""
-        opts = self.options
-        target = np.array([opts.grasp_tension[0] if s == "thumb" else opts.grasp_tension[1]
-                           for s in self._slots])
-        dt = self.model.opt.timestep
-        du = opts.close_speed * dt
-        done = np.zeros(len(self._slots), bool)
-        for _ in range(int(3.0 / dt)):
-            done |= self.static_tensions() >= target
-            if done.all() or np.any(self._u + du > COMMAND_RANGE[1]):
-                break
-            self._u = np.where(done, self._u, self._u + du)
-            self._set_ctrl(self._u)
-            mujoco.mj_step(self.model, self.data)
-        if not done.all():
-            names = [s for s, ok in zip(self._slots, done, strict=True) if not ok]
-            raise GraspError(f"{self.held}: fingers {names} never reached their grasp "
-                             f"tension (commands {np.round(self._u * 1e3, 2).tolist()} mm)")
+        target = self._close_to_tension()
         self._settle()
-        for _ in range(6):   # fingers keep wrapping after the first touch (SimHand.grasp)
-            short = target - self.static_tensions()
-            if np.all(np.abs(short) < 0.05 * target):
-                break
-            self._ramp_to(self._u + np.clip(short / self._true.tendon_stiffness,
-                                            -MAX_STEP, MAX_STEP))
-            self._settle()
+        self._top_up_tensions(target)
         pos, _ = self.arm_pose()
         self.move_arm(pos + np.array([0.0, 0.0, self.lift]), speed=0.05)
         settled = self._settle()
@@ -395,7 +374,7 @@ class CupsHand(SimHand):
 
     def release(self, seconds: float = 0.4) -> None:
         """Open the hand: ramp every tendon command to zero over `seconds`, then wait as
-        long again (the cup drops the last millimetres onto the stack)."""
+        long again (the cup drops the last centimetres into the stack)."""
         start = self._u.copy()
         n = max(1, int(round(seconds / self.model.opt.timestep)))
         for k in range(1, n + 1):
