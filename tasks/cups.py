@@ -1,35 +1,37 @@
 """Cup stacking (METHOD.md 6): the hand on an arm picks four cups in decreasing size, each
 grasped at an unknown tilt, corrects each in the hand (weighted SE(3), Eq. 12, alpha 9.5)
-and stacks them on the target cup.
+and stacks them into the target cup.
 
-Geometry, and why. The cups (models/objects/cup1..5.yaml) carry their tag under the bottom,
-so the palm camera sees the tag only when the palm faces the bottom: the cups stand upside
-down on the table and the hand comes from above, palm down. Upside-down cups stack as a
-tower, not nested: each cup's rim rests on the upturned bottom of the next larger cup
-(radii 40, 36, 32, 28, 24 mm: a cup's rim lies on the bottom below it if its axis is within
-4 mm of that cup's axis), and every tag stays visible from above. So the target cup1 stands
-upside down at `TARGET_XY`, and cups 2, 3, 4, 5 are picked in decreasing size and placed on
-top, each on the one before.
+Geometry, and why. The cups (models/objects/cup1..5.yaml) are open, tapered and nest: rim
+radii 40, 36, 32, 28, 24 mm, 60 mm tall, 2 mm walls flaring out by 6 degrees, so each cup
+fits in the next larger one with 2 mm to spare. Each carries its tag on the INSIDE bottom:
+the cups stand upright, the hand comes from above, palm down, and the palm camera sees the
+tag through the opening. The target cup1 stands at `TARGET_XY`; cups 2, 3, 4, 5 are picked
+in decreasing size and each is let go over the stack, into the cup before it.
 
-Each cup but the target rests tilted on a small support block under one side of its rim
+Each cup but the target rests tilted on a small support block under one side of its bottom
 (tilt `tilt_deg`, a seeded direction within 30 degrees of +-x, between the fingers, and a
 seeded yaw), so its pose in the hand after the pick is unknown. The arm (`sim.scenes.
 CupsHand`: three servoed wrist joints, palm down; its pose is its own known kinematics)
-takes the hand over the cup's nominal place on the table (it does not know the tilt), the
-fingers close, the arm lifts, and the filter identifies the grasp (Algorithm 1).
+takes the hand over the cup's nominal place (it does not know the tilt) at `PICK_HEIGHT`,
+centres the palm on the cup's axis where the pads will touch as the camera sees it, the
+fingers close on the wall 15-20 mm below the rim, the arm lifts, and the filter identifies
+the grasp (Algorithm 1).
 
 Per cup the task is then: the in-hand target pose is the camera's POM position after the
 identification with the cup levelled (its axis along the palm normal, yaw kept). The policy
 moves the tendons (weighted SE(3) error: [dx, dy, dz] in mm and alpha [droll, dpitch, dyaw]
 in degrees, alpha 9.5) until the camera puts the POM within `tolerance_mm` and
 `tolerance_deg` of the target or `steps_per_cup` moves are spent. The arm then carries the
-cup over the stack and lowers it so that the target in-hand pose would sit exactly on the
-stack (the arm plans with the target, not the true pose: the hand's remaining error is the
-placement error), stopping `clearance` above contact as the camera sees the cup. The errors
-at release are the true in-hand pose's distance from the target (sim) just before the hand
-opens: position [mm], rotation angle [deg] (the whole rotation, yaw included, though a
-cylinder does not care about yaw; the tilt alone is reported too). Then the hand opens, the
-cup drops the last millimetres, the arm lifts and goes to the next cup, which is picked and
+cup over the stack and lowers it towards its nested place as the target in-hand pose would
+put it (the arm plans with the target, not the true pose: the hand's remaining error is the
+placement error). The fingers wrap the wall below the rim, so they would hit the rim of the
+cup below before the cup is in: the hand lets go where the identified VLR's fingertips
+clear that rim by `clearance`, and the cup drops the last 20-30 mm, the tapered walls
+guiding it to the axis. The errors at release are the true in-hand pose's distance from the
+target (sim) just before the hand opens: position [mm], rotation angle [deg] (the whole
+rotation, yaw included, though a cup does not care about yaw; the tilt alone is reported
+too). Then the hand opens, the arm lifts and goes to the next cup, which is picked and
 identified inside the same `step` (an episode is one stack of four cups: only the first
 identification runs in `reset`).
 
@@ -82,7 +84,8 @@ class CupStackingEnv(HandTaskEnv):
         tilt_deg: (low, high) of the seeded tilt of each cup on its support [deg].
         tolerance_mm, tolerance_deg: a cup's in-hand target counts as reached within both.
         steps_per_cup: move budget of the in-hand correction of one cup.
-        clearance: the arm stops the cup's lowest rim point this far above the stack [m].
+        clearance: the hand lets go where the fingertips are this far above the rim of the
+            cup below (or the cup this far above its nested place, if that is higher) [m].
         command_band: as `HandTaskEnv`'s. Pulling is what tilts a cup held by its wall:
             0.4 mm of one side tendon turns it about 1.6 degrees, and the table tilts are
             5-10 degrees, so the band pulls up to 1.2 mm; releasing a side tendon by 0.5 mm
@@ -337,7 +340,7 @@ class CupStackingEnv(HandTaskEnv):
 
     def metrics(self) -> dict[str, Any]:
         """errors.position_mm_mean / rotation_deg_mean (at release, ground truth in the
-        sim) over the placed cups, and `cups_stacked` (a tower resting cup on cup, counted
+        sim) over the placed cups, and `cups_stacked` (cups nested one in the next, counted
         from the target up)."""
         recs = self.records
         key_p = "position_mm" if self.has_truth else "camera_position_mm"
