@@ -7,11 +7,27 @@ from vlr.errors import UserError
 from vlr.trial import TrialSettings, open_world
 
 
-def test_truth_settings_are_for_the_synthetic_world_only():
+def test_truth_settings_are_refused_where_the_world_cannot_take_them():
     with pytest.raises(UserError, match="true_stiffness"):
         TrialSettings(backend="sim", true_stiffness={"thumb.distal": 0.045})
     with pytest.raises(UserError, match="true_hand"):
-        TrialSettings(backend="sim", true_hand="nh1")
+        TrialSettings(backend="hardware", true_hand="nh1")
+
+
+def test_the_sim_is_built_with_the_true_hand_and_the_filter_keeps_the_nominal_one():
+    """NH1 in the sim: the left finger is NF1 (40 mm proximal link) in the simulated hand
+    and in the scoring truth; the filter's model is still the Model O's (62 mm)."""
+    w = open_world(TrialSettings(backend="sim", hand="modelo", true_hand="nh1", particles=100,
+                                 unknowns=("length:left.proximal",)))
+    try:
+        left = w.model.names.index("left")
+        assert w.model.segments[left, 0] == pytest.approx(0.062)
+        assert w.hand_spec.name == "modelo"
+        assert w.world.true_spec.mount("left").finger.proximal_length == pytest.approx(0.040)
+        w.world.grasp()
+        assert w.truth().segments[left, 0] == pytest.approx(0.040)
+    finally:
+        w.close()
 
 
 def test_the_filter_models_the_object_the_hardware_config_names():

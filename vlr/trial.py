@@ -44,7 +44,10 @@ class TrialSettings:
         backend: "synthetic", "sim" or "hardware" (any registered backend).
         object: object name or YAML path.
         hand: the hand the user believes in (nominal).
-        true_hand: synthetic only: the real hand when it differs (e.g. nh1).
+        true_hand: synthetic world or sim: the hand the world is built with when it differs
+            from `hand` (e.g. nh1: replaced fingers the filter does not know); the filter
+            keeps `hand` and identifies the `unknowns`. Not for hardware: the real hand is
+            what it is.
         particles: P.
         seed: seeds the world, the filter and the actions.
         unknowns: extra unknowns ("stiffness:thumb.distal", "length:left.proximal", ...).
@@ -97,10 +100,13 @@ class TrialSettings:
             v = getattr(self, name)
             if v is not None and not v > 0:
                 raise UserError(f"{name} {v} must be > 0")
-        for name in ("true_hand", "true_stiffness"):
-            if getattr(self, name) and self.backend != "synthetic":
-                raise UserError(f"{name} is for the synthetic world only: the sim and the "
-                                "real hand are what they are")
+        if self.true_stiffness and self.backend != "synthetic":
+            raise UserError("true_stiffness is for the synthetic world only: in the sim, "
+                            "give a true_hand whose finger has the other spring (e.g. "
+                            "modelo_thumb45); the real hand is what it is")
+        if self.true_hand and self.backend not in ("synthetic", "sim"):
+            raise UserError(f"true_hand is for the synthetic world and the sim only: the "
+                            f"{self.backend} hand is what it is")
         if not self.prior_spread_deg > 0:
             raise UserError(f"prior_spread_deg {self.prior_spread_deg} must be > 0")
         object.__setattr__(self, "unknowns", tuple(self.unknowns))
@@ -256,10 +262,13 @@ def open_world(settings: TrialSettings) -> World:
     from vlr.perception import observe
 
     options = {"config": settings.config} if settings.config else {}
-    hand = open_backend(settings.backend, object=settings.object, hand=settings.hand,
-                        seed=settings.seed, **options)
+    # The sim may be built with another hand than the filter's (true_hand: replaced fingers
+    # or springs that the filter identifies as unknowns); the filter keeps `hand_spec`.
+    hand = open_backend(settings.backend, object=settings.object,
+                        hand=settings.true_hand or settings.hand, seed=settings.seed, **options)
     spec = hand.object_spec
-    if (hand.spec.name, spec.name) != (hand_spec.name, obj_spec.name):
+    if not settings.true_hand and (hand.spec.name, spec.name) != (hand_spec.name,
+                                                                   obj_spec.name):
         # The backend decides what is there (the hardware config names its object and
         # hand): the filter's model must be that, not the command line's defaults.
         hand_spec = hand.spec

@@ -23,7 +23,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--backend", default="sim", help="sim | synthetic | hardware")
     p.add_argument("--object", default="apple")
     p.add_argument("--hand", default="modelo", help="the hand the user believes in (nominal)")
-    p.add_argument("--true-hand", help="synthetic world only: the real hand, if different")
+    p.add_argument("--true-hand", help="synthetic world or sim: the hand the world is built "
+                   "with, if not --hand (e.g. nh1); the filter keeps --hand")
     p.add_argument("--particles", type=int, default=60_000)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--unknown", action="append", default=[],

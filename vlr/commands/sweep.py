@@ -29,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--backend", default="sim", help="synthetic | sim | hardware")
     p.add_argument("--object", nargs="+", default=["apple"], help="objects (grid)")
     p.add_argument("--hand", nargs="+", default=["modelo"], help="nominal hands (grid)")
-    p.add_argument("--true-hand", help="synthetic world only: the real hand")
+    p.add_argument("--true-hand", help="synthetic world or sim: the hand the world is built with")
     p.add_argument("--unknown", action="append", default=[], help="as in vlr identify")
     p.add_argument("--seeds", default="0-4", help="e.g. 0-4 or 0,2,5 (default 0-4)")
     p.add_argument("--particles", type=int, default=60_000)

@@ -29,8 +29,8 @@ def _tasks() -> dict[str, object]:
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("task", help="run the VLR baseline controller on a manipulation task "
-                       "(handwriting, marble maze)")
-    p.add_argument("name", help="handwriting | maze")
+                       "(handwriting, marble maze, cup stacking)")
+    p.add_argument("name", help="handwriting | maze | cups")
     p.add_argument("--backend", default="sim", help="sim | hardware")
     p.add_argument("--config", help="hardware backend: the hardware YAML file")
     p.add_argument("--seed", type=int, default=0)
