@@ -1,7 +1,7 @@
 """Cup stacking (`vlr/CupStacking-v0`, tasks/cups.py): the env checker, same-seed
-determinism, the hardware backend refused in one line, and `vlr task cups` writing its
-result and picture. One cup instead of four and a short identification keep it to about a
-minute; the five-seed figures are in docs/TASKS.md."""
+determinism, the hardware backend refused in one line, `vlr task cups` writing its result
+and picture, and the nesting physics without the hand. One cup instead of four and a short
+identification keep it to about a minute; the five-seed figures are in docs/TASKS.md."""
 
 from __future__ import annotations
 
