@@ -155,6 +155,30 @@ def test_failed_solve_is_flagged_not_nan(modelo):
     assert np.isneginf(ll[1]) and np.isneginf(ll[2]) and np.isfinite(ll[0])
 
 
+def test_model_error_that_grows_with_the_motion(modelo):
+    """kappa > 0: a particle that predicts a large motion is judged with a wider scale. With
+    the same 2 mm error it is more likely than one that predicted no motion; with no error
+    it is less likely (the likelihood keeps its normalisation, so a wide tolerance is not
+    free). kappa = 0 ignores the motion."""
+    from vlr.observation import ObservationModel, PomObservation
+
+    _, st, _ = grasp(modelo, n=2)
+    st.pos[1] = st.pos[0]
+    st.rot[1] = st.rot[0]
+    moved = (np.array([0.0, 0.02]), np.array([0.0, 0.3]))        # 20 mm, 17 degrees
+    model = ObservationModel(motion_fraction=0.1)
+    far = PomObservation(st.pos[0] + np.array([0.002, 0.0, 0.0]), st.rot[0])
+    near = PomObservation(st.pos[0], st.rot[0])
+    ll_far = model.log_likelihood(st, far, moved)
+    ll_near = model.log_likelihood(st, near, moved)
+    assert ll_far[1] > ll_far[0] and ll_near[1] < ll_near[0]
+    fixed = ObservationModel().log_likelihood(st, far, moved)
+    assert fixed[0] == pytest.approx(fixed[1])
+    assert ll_far[0] == pytest.approx(fixed[0])      # no motion: the fixed scales
+    with pytest.raises(ValueError, match="motion_fraction -0.1"):
+        ObservationModel(motion_fraction=-0.1)
+
+
 def test_three_joint_two_finger_pinch():
     ch = Chain(lengths=(0.04, 0.03), pad_center=(0.0, 0.003, 0.025), pad_radius=0.01,
                pulley_radii=(0.008, 0.006, 0.005), stiffness=(0.04, 0.03, 0.02),

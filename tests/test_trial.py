@@ -55,3 +55,15 @@ def test_a_nominal_guess_per_finger():
     assert np.degrees(alike.nominal.theta[thumb, 1]) < 40
     with pytest.raises(UserError, match="give 2 angles .* or 6"):
         open_world(TrialSettings(backend="synthetic", nominal_theta_deg=(-10, 15, 3)))
+
+
+def test_motion_scaled_model_error_runs_a_trial_and_refuses_a_negative_fraction():
+    from vlr.trial import run_trial
+
+    summary = run_trial(TrialSettings(backend="synthetic", particles=300, max_iterations=2,
+                                      sigma_motion=0.1))
+    assert summary["settings"]["sigma_motion"] == 0.1 and summary["iterations"] == 2
+    with pytest.raises(UserError, match="sigma_motion -1"):
+        TrialSettings(sigma_motion=-1.0)
+    with pytest.raises(UserError, match="sigma_motion 'big'"):
+        TrialSettings(sigma_motion="big")

@@ -22,7 +22,7 @@ import numpy as np
 
 from vlr.kinematics import HandModel, angles_from_normals, normals_from_angles
 from vlr.motion import MotionConfig, MotionModel, ObjectParams, ParticleState
-from vlr.observation import ObservationModel, PoseObservation
+from vlr.observation import ObservationModel, PoseObservation, rotation_angle
 
 __all__ = [
     "Unknown",
@@ -301,6 +301,7 @@ class ParticleFilter:
         self.project_status = np.zeros(5, dtype=np.int64)
         self.newton_iterations: dict[str, float] = {}
         self.recoveries = 0  # times every particle failed and the prior was resampled
+        self._before: tuple[np.ndarray, np.ndarray] | None = None  # POM poses before an action
         # Seconds per phase of the last iteration (motion, observation, weights, resampling,
         # jitter, summary), for `vlr bench`.
         self.timings: dict[str, float] = {}
@@ -385,6 +386,10 @@ class ParticleFilter:
         self.command = np.asarray(command, dtype=float).copy()
         self.iteration += 1
         t0 = time.perf_counter()
+        # The POM poses before the action: each particle's predicted motion over it scales
+        # the likelihood's model error when `observation.motion_fraction` > 0.
+        self._before = ((self.state.pos.copy(), self.state.rot.copy())
+                        if self.obs_model.motion_fraction > 0 else None)
         _, iters = self.motion.solve(self.state, self.command, u_from=previous)
         # Median Newton iterations of the action solve and of the post-jitter settle
         # (`vlr bench` reports them: they are what a filter iteration costs).
@@ -404,6 +409,7 @@ class ParticleFilter:
         theta = est[:nf * nk].reshape(nf, nk)
         contact = est[nf * nk:nf * nk + 2 * nf].reshape(nf, 2)
         self._sample_prior(observation, self.command, theta, contact)
+        self._before = None      # new particles: no motion of theirs to speak of
         self.recoveries += 1
 
     def _update(self, observation: PoseObservation | None) -> IterationRecord:
@@ -420,7 +426,11 @@ class ParticleFilter:
             return rec
         # Eq. 5 likelihood, tempered (METHOD.md 8.2).
         t = time.perf_counter()
-        log_lik = self.obs_model.log_likelihood(state, observation)
+        motion = None
+        if self._before is not None:
+            pos0, rot0 = self._before
+            motion = (np.linalg.norm(state.pos - pos0, axis=-1), rotation_angle(rot0, state.rot))
+        log_lik = self.obs_model.log_likelihood(state, observation, motion)
         tm["observation"] = time.perf_counter() - t
         t = time.perf_counter()
         w, beta = temper(log_lik, cfg.ess_fraction)

@@ -10,6 +10,14 @@ Noise model: independent Gaussians on the position error [m] and on the rotation
 R_obs^T R_pred [rad]. The scales are perception accuracy (about 0.05 mm and 0.2 degree,
 METHOD.md 8.2) plus model error; the defaults 0.5 mm and 1 degree are deliberately wider,
 because a likelihood narrower than the model-world gap makes the filter confidently wrong.
+
+Process noise that grows with the action's size (issue #5, model term (c)): the model-world
+gap is a fraction of the motion an action causes (`vlr gap`'s per-action ratio), so with
+`motion_fraction` kappa > 0 each particle's scales become
+sigma^2 + (kappa * its predicted motion)^2, position and rotation alike, its motion being the
+POM's displacement and rotation angle over the action. Since the scales then differ between
+particles, the likelihood keeps its normalisation, -log sigma_pos - log sigma_rot: without
+it, particles predicting large motions would be favoured for their wide tolerance.
 """
 
 from __future__ import annotations
@@ -65,10 +73,20 @@ class ObservationModel:
     Attributes:
         sigma_pos: position noise scale [m] (perception ~5e-5 plus model error).
         sigma_rot: rotation-angle noise scale [rad] (perception ~0.0035 plus model error).
+        motion_fraction: kappa, the model error as a fraction of each particle's predicted
+            motion over the action (module docstring); 0 = fixed scales.
     """
 
     sigma_pos: float = 0.5e-3
     sigma_rot: float = float(np.radians(1.0))
+    motion_fraction: float = 0.0
+
+    def __post_init__(self) -> None:
+        for name in ("sigma_pos", "sigma_rot"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} {getattr(self, name)!r} must be > 0")
+        if not self.motion_fraction >= 0:
+            raise ValueError(f"motion_fraction {self.motion_fraction!r} must be >= 0")
 
     def predict(self, state: ParticleState) -> tuple[np.ndarray, np.ndarray]:
         """Predicted POM pose of every particle: position (P, 3), rotation (P, 3, 3)."""
@@ -82,9 +100,20 @@ class ObservationModel:
         e_rot = rotation_angle(rot, np.asarray(obs.rotation)[None, :, :])
         return e_pos, e_rot
 
-    def log_likelihood(self, state: ParticleState, obs: PoseObservation) -> np.ndarray:
+    def log_likelihood(self, state: ParticleState, obs: PoseObservation,
+                       motion: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
         """log p(obs | particle) up to a constant (Eq. 5 with Gaussian noise), (P,);
-        -inf for invalid particles, so a failed solve gets zero weight, never NaN."""
+        -inf for invalid particles, so a failed solve gets zero weight, never NaN.
+
+        `motion`: each particle's predicted POM displacement [m] and rotation angle [rad]
+        over the action, (P,) each; used when `motion_fraction` > 0 (module docstring)."""
         e_pos, e_rot = self.errors(state, obs)
-        ll = -0.5 * ((e_pos / self.sigma_pos) ** 2 + (e_rot / self.sigma_rot) ** 2)
+        if self.motion_fraction > 0 and motion is not None:
+            k = self.motion_fraction
+            s_pos = np.sqrt(self.sigma_pos ** 2 + (k * np.asarray(motion[0])) ** 2)
+            s_rot = np.sqrt(self.sigma_rot ** 2 + (k * np.asarray(motion[1])) ** 2)
+            ll = (-0.5 * ((e_pos / s_pos) ** 2 + (e_rot / s_rot) ** 2)
+                  - np.log(s_pos / self.sigma_pos) - np.log(s_rot / self.sigma_rot))
+        else:
+            ll = -0.5 * ((e_pos / self.sigma_pos) ** 2 + (e_rot / self.sigma_rot) ** 2)
         return np.where(state.valid & np.isfinite(ll), ll, -np.inf)

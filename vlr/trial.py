@@ -54,6 +54,8 @@ class TrialSettings:
         true_stiffness: synthetic only: {"finger.joint": k [N m/rad]} true spring rates.
         max_iterations: action budget; min_iterations: no convergence stop before this.
         sigma_pos_mm, sigma_rot_deg: likelihood scales; None takes `DEFAULT_SIGMA`.
+        sigma_motion: the likelihood's model error as a fraction of each particle's
+            predicted motion over the action (`vlr.observation`, kappa); 0 = fixed scales.
         nominal_theta_deg: the user's guess of the grasp's joint angles [deg] (what one sees
             looking at the hand): K angles for every finger alike, or N x K, finger by
             finger in the hand's order (a thumb that wraps a thin object); None: the
@@ -79,6 +81,7 @@ class TrialSettings:
     min_iterations: int = 0
     sigma_pos_mm: float | None = None
     sigma_rot_deg: float | None = None
+    sigma_motion: float = 0.0
     nominal_theta_deg: tuple[float, ...] | None = None
     prior_spread_deg: float = 3.0
     rolling: bool = False
@@ -100,6 +103,8 @@ class TrialSettings:
             v = getattr(self, name)
             if v is not None and not v > 0:
                 raise UserError(f"{name} {v} must be > 0")
+        if not self.sigma_motion >= 0:
+            raise UserError(f"sigma_motion {self.sigma_motion} must be >= 0")
         if self.true_stiffness and self.backend != "synthetic":
             raise UserError("true_stiffness is for the synthetic world only: in the sim, "
                             "give a true_hand whose finger has the other spring (e.g. "
@@ -135,9 +140,9 @@ class TrialSettings:
         for name in ("particles", "seed", "max_iterations", "min_iterations"):
             if not is_int(getattr(self, name)):
                 raise bad(name, "an integer")
-        for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg"):
+        for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg", "sigma_motion"):
             v = getattr(self, name)
-            if not (is_real(v) or (v is None and name != "prior_spread_deg")):
+            if not (is_real(v) or (v is None and name in ("sigma_pos_mm", "sigma_rot_deg"))):
                 raise bad(name, "a number")
         if not isinstance(self.rolling, bool):
             raise bad("rolling", "true or false")
@@ -316,7 +321,8 @@ def identify_config(settings: TrialSettings, model):
                         unknowns=settings.unknowns,
                         theta_spread=float(np.radians(settings.prior_spread_deg)),
                         observation=ObservationModel(sigma_pos=sp * 1e-3,
-                                                     sigma_rot=float(np.radians(sr))))
+                                                     sigma_rot=float(np.radians(sr)),
+                                                     motion_fraction=settings.sigma_motion))
     return IdentifyConfig(max_iterations=settings.max_iterations,
                           min_iterations=settings.min_iterations, filter=fcfg,
                           exploration=settings.exploration)
