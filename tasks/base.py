@@ -60,9 +60,10 @@ class HandTaskEnv(gym.Env):
         identify_iterations: its exploratory moves (all are made, even after convergence).
         max_step: action bound per tendon and move [m].
         command_band: (release, pull): commands stay within [centre - release, centre +
-            pull] of the task's centre command [m]. Releasing is what loses a fingertip
-            (a side finger's 12 N grasp tension is gone after 0.6 mm at 20 N/mm), so the
-            default band releases less than it pulls.
+            pull] of the task's centre command [m]; each a number, or one per tendon in the
+            hand's order (a finger that holds more tension can release more). Releasing is
+            what loses a fingertip (a side finger's 12 N grasp tension is gone after 0.6 mm
+            at 20 N/mm), so the default band releases less than it pulls.
         squeeze: the task's centre command is the grasp command plus this much on every
             tendon [m]; after identification the commands move there (in moves of at most
             `max_step`, the filter following) before the task starts.
@@ -98,10 +99,7 @@ class HandTaskEnv(gym.Env):
         self.particles = int(particles)
         self.identify_iterations = int(identify_iterations)
         self.max_step = float(max_step)
-        band = np.broadcast_to(np.asarray(command_band, dtype=float), (2,))
-        if np.any(band < 0):
-            raise ValueError(f"command_band {command_band!r} must be >= 0")
-        self.command_band = (float(band[0]), float(band[1]))
+        self.command_band = _band(command_band)
         self.squeeze = float(squeeze)
         self.include_image = bool(include_image)
         self.hardware_config = hardware_config
@@ -362,6 +360,21 @@ class HandTaskEnv(gym.Env):
     def picture(self, path) -> None:
         """Write the task's picture (PNG) to `path`."""
         raise NotImplementedError
+
+
+def _band(command_band) -> tuple:
+    """(release, pull), each a number [m] or one per tendon (3 values), all >= 0."""
+    try:
+        release, pull = command_band
+        parts = [np.asarray(v, dtype=float) for v in (release, pull)]
+    except (TypeError, ValueError):
+        raise ValueError(f"command_band {command_band!r} must be (release, pull) [m], each a "
+                         "number or one per tendon") from None
+    if any(p.shape not in ((), (3,)) or np.any(p < 0) or not np.all(np.isfinite(p))
+           for p in parts):
+        raise ValueError(f"command_band {command_band!r}: release and pull must be >= 0, "
+                         "each a number or one per tendon [m]")
+    return tuple(float(p) if p.ndim == 0 else p for p in parts)
 
 
 def save_figure(fig, path) -> None:

@@ -88,8 +88,9 @@ class CupStackingEnv(HandTaskEnv):
             cup below (or the cup this far above its nested place, if that is higher) [m].
         command_band: as `HandTaskEnv`'s. Pulling is what tilts a cup held by its wall:
             0.4 mm of one side tendon turns it about 1.6 degrees, and the table tilts are
-            5-10 degrees, so the band pulls up to 1.2 mm; releasing a side tendon by 0.5 mm
-            loses its fingertip, so it releases 0.25 mm at most.
+            5-10 degrees, so the band pulls up to 1.2 mm. Releasing a side tendon by 0.5 mm
+            loses its fingertip, so the sides release 0.25 mm at most; the thumb holds 22 N
+            against the sides' 12 N and releases 0.5 mm (thumb, left, right).
         squeeze: as `HandTaskEnv`'s: 0.3 mm on every tendon before the correction, so
             that one finger's pull does not unload the opposite fingertip (without it, the
             1.2 mm band lost a fingertip on seeds 0 and 1).
@@ -104,7 +105,7 @@ class CupStackingEnv(HandTaskEnv):
                  n_cups: int = 4, tilt_deg: tuple[float, float] = (5.0, 10.0),
                  tolerance_mm: float = 0.3, tolerance_deg: float = 0.3,
                  steps_per_cup: int = 20, clearance: float = 0.002,
-                 command_band: tuple[float, float] = (0.25e-3, 1.2e-3),
+                 command_band: tuple = ((0.5e-3, 0.25e-3, 0.25e-3), 1.2e-3),
                  squeeze: float = 0.3e-3, **kwargs: Any) -> None:
         if backend == "hardware":
             raise UserError("cup stacking needs an arm (a wrist pose command, palm down, "

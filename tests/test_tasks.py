@@ -89,6 +89,8 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
            (["handwriting", "--option", "letter_height=-1"], "letter_height"),
            (["handwriting", "--option", "max_step=0"], "max_step"),
            (["maze", "--option", "n_runs=0"], "n_runs"),
+           (["maze", "--option", "command_band=(-0.001,0.001)"], "command_band"),
+           (["maze", "--option", "command_band=((0.001,0.001),0.001)"], "command_band"),
            (["handwriting", "--option", "colour=1"], "colour")]
     for argv, message in bad:
         assert main(["task", *argv, "--out", str(tmp_path / "out")]) == 2, argv
@@ -97,6 +99,14 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
     assert main(["task", "handwriting", "--out", str(a_file / "x")]) == 2
     assert "--out" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_a_command_band_may_give_each_tendon_its_own_limits():
+    from tasks.handwriting import HandwritingEnv
+
+    env = HandwritingEnv(command_band=((0.5e-3, 0.25e-3, 0.25e-3), 1e-3))
+    release, pull = env.command_band
+    assert release.shape == (3,) and pull == 1e-3
 
 
 def test_maze_on_hardware_names_the_object_it_needs(tmp_path, capsys):
