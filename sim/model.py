@@ -253,9 +253,18 @@ def cup_dimensions(obj: ObjectSpec) -> dict[str, float]:
     taper = math.radians(float(e.get("taper_deg", 6.0)))
     height = 2 * half
     bottom = float(e.get("bottom", 0.0025))
+    wall = float(e.get("wall", 0.002))
     floor_depth = TAG_CARD_THICKNESS + bottom
-    return {"rim_radius": rim_r, "bottom_radius": rim_r - height * math.tan(taper),
-            "height": height, "wall": float(e.get("wall", 0.002)), "bottom": bottom,
+    bottom_r = rim_r - height * math.tan(taper)
+    if not (0 <= taper < math.radians(45) and wall > 0 and bottom > 0
+            and bottom_r > 2 * wall and height > 2 * floor_depth):
+        raise SpecError(f"object {obj.name}: an upright cup needs 0 <= taper_deg < 45, wall and "
+                        f"bottom > 0, a bottom radius over twice the wall (here "
+                        f"{bottom_r * 1e3:.1f} mm) and a height over twice the floor "
+                        f"(taper_deg {e.get('taper_deg', 6.0)!r}, wall {wall!r}, "
+                        f"bottom {bottom!r}, size {list(obj.size)})")
+    return {"rim_radius": rim_r, "bottom_radius": bottom_r,
+            "height": height, "wall": wall, "bottom": bottom,
             "taper": taper, "floor_depth": floor_depth, "rim_height": height - floor_depth}
 
 

@@ -88,8 +88,9 @@ class CupStackingEnv(HandTaskEnv):
             cup below (or the cup this far above its nested place, if that is higher) [m].
         command_band: as `HandTaskEnv`'s. Pulling is what tilts a cup held by its wall:
             0.4 mm of one side tendon turns it about 1.6 degrees, and the table tilts are
-            5-10 degrees, so the band pulls up to 1.2 mm. Releasing a side tendon by 0.5 mm
-            loses its fingertip, so the sides release 0.25 mm at most; the thumb holds 22 N
+            5-10 degrees, so the band pulls up to 1.2 mm. Releasing a side tendon by 0.6 mm
+            while the other pulls 0.8 mm lost its fingertip (docs/scripts/
+            cups_tendon_probe.py), so the sides release 0.25 mm at most; the thumb holds 22 N
             against the sides' 12 N and releases 0.5 mm (thumb, left, right).
         squeeze: as `HandTaskEnv`'s: 0.3 mm on every tendon before the correction, so
             that one finger's pull does not unload the opposite fingertip (without it, the

@@ -103,3 +103,14 @@ def test_a_cup_let_go_over_a_larger_one_nests_in_it(tilt_deg, offset_mm, nests):
     p, _ = hand.cup_pose("cup2")
     if nests:                                    # down on cup1's floor, not wedged above it
         assert abs(p[2] - (f1 + f2)) < 1e-3
+
+
+def test_a_cup_spec_that_cannot_be_built_is_refused_by_name():
+    from dataclasses import replace
+
+    from sim.model import build_object
+    from vlr.spec import SpecError, load_object
+
+    cup = load_object("cup5")
+    with pytest.raises(SpecError, match=r"cup5: an upright cup needs .*\(taper_deg 40,"):
+        build_object(replace(cup, extras={**cup.extras, "taper_deg": 40}))
