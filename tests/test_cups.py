@@ -22,7 +22,8 @@ QUICK = {"particles": 2000, "identify_iterations": 1, "n_cups": 1}
 def test_cup_stacking_passes_the_env_checker_and_renders():
     env = gym.make(tasks.CUP_STACKING, render_mode="rgb_array", **QUICK)
     try:
-        check_env(env.unwrapped)
+        env.reset(seed=0)   # seeded: check_env also resets without a seed, which would draw
+        check_env(env.unwrapped)  # one from the OS and make the test vary run to run
         obs, info = env.reset(seed=1)
         frame = env.render()
         assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
