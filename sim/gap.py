@@ -26,6 +26,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from sim.pads import SLIDE_FRICTION, TORSION_FRICTION
 from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
 from vlr.kinematics import HandModel
@@ -34,12 +35,15 @@ from vlr.motion import STATUS, MotionConfig, MotionModel, ObjectParams, Particle
 __all__ = ["LADDER", "GapSettings", "record_actions", "measure_gap", "gap_report", "register"]
 
 _BASE = ("springs", "tendon", "limits", "contacts")
-# Model terms switched on in turn; the last row is the full model.
-LADDER: tuple[tuple[str, tuple[str, ...]], ...] = (
-    ("fixed contacts, no weights", _BASE),
-    ("+ link weights", _BASE + ("link_gravity",)),
-    ("+ object weight", _BASE + ("link_gravity", "object_gravity")),
-    ("+ rolling", _BASE + ("link_gravity", "object_gravity", "rolling")),
+_ALL = _BASE + ("link_gravity", "object_gravity", "rolling")
+# Model terms switched on in turn: (name, energy terms, friction on the rolling contacts);
+# the last row is the full model.
+LADDER: tuple[tuple[str, tuple[str, ...], bool], ...] = (
+    ("fixed contacts, no weights", _BASE, False),
+    ("+ link weights", _BASE + ("link_gravity",), False),
+    ("+ object weight", _BASE + ("link_gravity", "object_gravity"), False),
+    ("+ rolling", _ALL, False),
+    ("+ friction", _ALL, True),
 )
 OBJECTS = ("apple", "wine_glass", "toy_block", "flat_screwdriver", "gelatin_box")
 
@@ -56,6 +60,9 @@ class GapSettings:
         action_range: |tendon change| range [m]; band: commands stay this close to the grasp.
         rolling_substeps: solves per action with rolling (`MotionConfig.rolling_substeps`).
         spin_stiffness: the pads' torsional stiffness [N m/rad] (`MotionConfig`).
+        slide_friction, spin_friction: the pads' sliding and torsional [m] friction
+            coefficients in the friction rung (`MotionConfig`); by default the sim's pads'
+            (`sim.model`): known, like the pad's radius.
     """
 
     object: str = "apple"
@@ -67,6 +74,8 @@ class GapSettings:
     band: float = 0.4e-3
     rolling_substeps: int = MotionConfig.rolling_substeps
     spin_stiffness: float = MotionConfig.spin_stiffness
+    slide_friction: float = SLIDE_FRICTION
+    spin_friction: float = TORSION_FRICTION
 
     def __post_init__(self) -> None:
         if not isinstance(self.actions, int) or self.actions < 1:
@@ -75,6 +84,12 @@ class GapSettings:
             raise UserError(f"drift actions {self.drift_actions!r} must be an integer >= 1")
         if not (np.isfinite(self.spin_stiffness) and self.spin_stiffness >= 0):
             raise UserError(f"spin stiffness {self.spin_stiffness!r} N m/rad must be >= 0")
+        if not self.slide_friction > 0:
+            raise UserError(f"slide friction {self.slide_friction!r} must be > 0 (inf: no "
+                            "contact slides)")
+        if not (np.isfinite(self.spin_friction) and 0 <= self.spin_friction <= 0.01):
+            raise UserError(f"spin friction {self.spin_friction!r} m must be in [0, 0.01] "
+                            "(a torsional friction coefficient, about a pad's contact radius)")
         if not isinstance(self.rolling_substeps, int) or self.rolling_substeps < 1:
             raise UserError(f"rolling substeps {self.rolling_substeps!r} must be an integer "
                             ">= 1")
@@ -151,12 +166,17 @@ def _motion_error(p0, r0, p1, r1, t0, t1) -> tuple[float, float, float, float]:
             float(np.linalg.norm(dp_true)), _angle_deg(dr_true))
 
 
-def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings) -> dict:
-    """Per-action, static and drift gap of the motion model with `terms` (module docstring)."""
+def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
+                friction: bool = False) -> dict:
+    """Per-action, static and drift gap of the motion model with `terms` (module docstring),
+    with the pads' friction (`settings`) if `friction`."""
     model = HandModel.from_spec(rec.hand_spec)
     obj = ObjectParams.from_spec(rec.object_spec)
     cfg = MotionConfig(terms=terms, rolling_substeps=settings.rolling_substeps,
                        spin_stiffness=settings.spin_stiffness)
+    if friction:
+        cfg = replace(cfg, slide_friction=settings.slide_friction,
+                      spin_friction=settings.spin_friction)
     motion = MotionModel(model, obj, cfg)
     # The static settle may travel further than an action may (the model's own equilibrium).
     settle = replace(cfg, jump_theta=1.0, jump_pos=0.05, max_iter=200)
@@ -229,7 +249,7 @@ def _drift(motion: MotionModel, settle: MotionConfig, model: HandModel, rec: Rec
 
 
 def gap_report(settings: GapSettings,
-               ladder: tuple[tuple[str, tuple[str, ...]], ...] = LADDER) -> dict:
+               ladder: tuple[tuple[str, tuple[str, ...], bool], ...] = LADDER) -> dict:
     """Record the actions once, then measure every rung of `ladder` on them. The top-level
     ratios are the full model's (the last rung)."""
     t0 = time.perf_counter()
@@ -237,7 +257,8 @@ def gap_report(settings: GapSettings,
     if len(rec.commands) < 2:
         raise UserError(f"{settings.object}: the grasp was lost at the first action; "
                         "nothing to measure")
-    configs = [{"name": name, **measure_gap(rec, terms, settings)} for name, terms in ladder]
+    configs = [{"name": name, **measure_gap(rec, terms, settings, friction)}
+               for name, terms, friction in ladder]
     full = configs[-1]
     true_p = [np.linalg.norm(b.position - a.position) * 1e3
               for a, b in zip(rec.truths, rec.truths[1:], strict=False)]
@@ -248,6 +269,8 @@ def gap_report(settings: GapSettings,
         "actions": len(rec.commands) - 1, "grasp_lost_at": rec.dropped_at,
         "rolling_substeps": settings.rolling_substeps,
         "spin_stiffness": settings.spin_stiffness,
+        "slide_friction": settings.slide_friction,
+        "spin_friction": settings.spin_friction,
         "true_motion": {"position_mm_mean": float(np.mean(true_p)),
                         "orientation_deg_mean": float(np.mean(true_r))},
         "ratio_position_mean": full["ratio_position_mean"],
@@ -294,6 +317,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--spin-stiffness", type=float, default=MotionConfig.spin_stiffness,
                    help="the pads' torsional stiffness with rolling [N m/rad] (default "
                    f"{MotionConfig.spin_stiffness})")
+    p.add_argument("--slide-friction", type=float, default=SLIDE_FRICTION,
+                   help="the pads' sliding friction coefficient in the friction rung "
+                   f"(default {SLIDE_FRICTION}, the sim's pads')")
+    p.add_argument("--spin-friction", type=float, default=TORSION_FRICTION,
+                   help="the pads' torsional friction coefficient [m] in the friction rung "
+                   f"(default {TORSION_FRICTION}, the sim's pads')")
     p.add_argument("--json", help="write the report (per object, per model rung) as JSON")
     p.set_defaults(func=run)
 
@@ -314,7 +343,9 @@ def run(args: argparse.Namespace) -> int:
         settings = GapSettings(object=name, hand=args.hand, seed=args.seed,
                                actions=args.actions, drift_actions=args.drift_actions,
                                rolling_substeps=args.substeps,
-                               spin_stiffness=args.spin_stiffness)
+                               spin_stiffness=args.spin_stiffness,
+                               slide_friction=args.slide_friction,
+                               spin_friction=args.spin_friction)
         rep = gap_report(settings)
         print(format_report(rep) + "\n", flush=True)
         reports.append(rep)

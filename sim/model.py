@@ -21,15 +21,13 @@ from dm_control import mjcf
 
 import models
 from models.make_tags import TEXTURE_PER_BLACK, tag_path, write_tag
+from sim.pads import ROLL_FRICTION, SLIDE_FRICTION, TORSION_FRICTION
 from vlr.spec import FingerSpec, HandSpec, ObjectSpec, SpecError
 
 # Contact model for stable fingertip grasps (METHOD.md 8.2, models/README.md "Contacts").
 TIMESTEP = 0.001            # s; solref is clamped to 2 steps, so 4 ms needs <= 2 ms
 SOLREF = (0.004, 1.0)       # stiff contacts, critically damped
 IMPRATIO = 10.0             # elliptic cones, frictional stiffness ~ normal
-SLIDE_FRICTION = 1.0        # rubber pad on plastic
-TORSION_FRICTION = 0.001    # m; ~1 mm: MuJoCo's 10 mm default locks a pad's spin
-ROLL_FRICTION = 0.0
 NOSLIP_ITERATIONS = 10
 
 TENDON_DAMPING = 40.0       # N s/m on the tendon actuator: servo velocity loop, see README

@@ -224,3 +224,77 @@ def test_reanchoring_keeps_the_grasp_force(modelo):
     theta0 = zeroed.theta.copy()
     mm.solve(zeroed, u0)
     assert np.degrees(np.abs(zeroed.theta - theta0).max()) > 0.003  # it relaxes
+
+
+FRICTION = replace(ROLL, slide_friction=1.0, spin_friction=0.001)
+
+
+def _cone_load(mm: MotionModel, st: ParticleState) -> np.ndarray:
+    """(P, N) each contact's tangential force over mu times its normal force (rolling term)."""
+    from vlr.surface import surface_normals
+
+    m = surface_normals(mm.model, st.theta, st.normals, st.rot)
+    c = np.einsum("pba,pnb->pna", st.rot, st.contacts(mm.model) - st.pos[:, None, :])
+    d = c - st.anchors
+    t = np.linalg.norm(d - np.sum(d * m, axis=-1, keepdims=True) * m, axis=-1)
+    roll = mm.rolling_frames(st, m)
+    n = mm.normal_forces(st, roll[..., :3])
+    return mm.config.contact_stiffness * t / (mm.config.slide_friction * np.maximum(n, 1e-12))
+
+
+def test_friction_gradient_matches_reference(modelo):
+    """Sliding friction (a Huber function of the tangential stretch: stick spring inside the
+    cone, mu N |t| beyond) and torsional friction (smoothed mu_t N |s|): the kernel's energy
+    and gradient against finite differences of the NumPy reference, with one contact
+    sticking and the others slipping (the Hessian is Gauss-Newton)."""
+    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
+    _, st, u0 = grasp(modelo)
+    mm = MotionModel(modelo, obj, FRICTION)
+    roll = mm.rolling_frames(st)[0]
+    rng = np.random.default_rng(5)
+    st.theta += rng.normal(0, 0.03, st.theta.shape)
+    st.rot[0] = st.rot[0] @ rotvec_to_matrix(rng.normal(0, 0.05, 3))
+    st.pos[0] += rng.normal(0, 5e-4, 3)
+    roll[:, 16] = (50.0, 0.05, 0.02)  # N: the first contact sticks, the others slip
+    e = check_derivatives(mm, st, u0, roll, e_rel=1e-10, hess_atol=None)
+    glued = MotionModel(modelo, obj, ROLL)
+    assert e < glued.evaluate(st, 0, u0, roll)[0]  # slipping costs less than stretching
+
+
+def test_friction_keeps_every_contact_inside_its_cone(modelo):
+    """After an action, every contact's tangential force is at most mu times its normal force
+    (the return mapping); without friction, the same action leaves a contact far outside
+    (the glued contact pulls sideways with a force the pad cannot hold). A weightless grasp:
+    this test hand's grasps under gravity hang on their glued contacts, which friction
+    rightly refuses."""
+    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
+    glued = replace(ROLL, gravity=(0.0, 0.0, 0.0))
+    friction = replace(FRICTION, gravity=(0.0, 0.0, 0.0))
+    _, st, u0 = grasp(modelo, config=glued, theta=(0.3, 0.3))
+    du = np.array([6e-4, -4e-4, 0.0])
+    loads = {}
+    for name, cfg in (("friction", friction), ("glued", glued)):
+        s = st.copy()
+        status, _ = MotionModel(modelo, obj, cfg).solve(s, u0 + du, u_from=u0)
+        assert np.all(status == 0), name
+        loads[name] = _cone_load(MotionModel(modelo, obj, friction), s)
+    assert loads["friction"].max() <= 1.0 + 1e-3
+    assert loads["glued"].max() > 10.0
+
+
+def test_a_settle_has_no_friction(modelo):
+    """Friction needs a history: a settle (no `u_from`) is the frictionless model's."""
+    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
+    _, st, u0 = grasp(modelo, config=ROLL)
+    a, b = st.copy(), st.copy()
+    MotionModel(modelo, obj, FRICTION).solve(a, u0 + 2e-4)
+    MotionModel(modelo, obj, ROLL).solve(b, u0 + 2e-4)
+    np.testing.assert_array_equal(a.theta, b.theta)
+    np.testing.assert_array_equal(a.anchors, b.anchors)
+
+
+@pytest.mark.parametrize("kw", [dict(slide_friction=0.0), dict(slide_friction=-1.0),
+                                dict(spin_friction=-1e-3), dict(spin_smoothing=0.0)])
+def test_bad_friction_settings_are_named(kw):
+    with pytest.raises(ValueError, match=next(iter(kw))):
+        MotionConfig(**kw)

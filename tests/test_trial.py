@@ -1,5 +1,7 @@
 """vlr.trial: what a trial's world is made of, and settings that make no sense refused."""
 
+import math
+
 import pytest
 
 import models
@@ -67,3 +69,23 @@ def test_motion_scaled_model_error_runs_a_trial_and_refuses_a_negative_fraction(
         TrialSettings(sigma_motion=-1.0)
     with pytest.raises(UserError, match="sigma_motion 'big'"):
         TrialSettings(sigma_motion="big")
+
+
+def test_pad_friction_reaches_the_filter_and_needs_rolling():
+    from vlr.trial import identify_config
+
+    s = TrialSettings(backend="synthetic", particles=50, rolling=True, slide_friction=1.0,
+                      spin_friction=0.001)
+    world = open_world(s)
+    try:
+        motion = identify_config(s, world.model).filter.motion
+    finally:
+        world.close()
+    assert motion.rolling and motion.slide_friction == 1.0 and motion.spin_friction == 0.001
+    assert math.isinf(TrialSettings(rolling=True).motion_config().slide_friction)
+    with pytest.raises(UserError, match="set rolling too"):
+        TrialSettings(slide_friction=1.0)
+    with pytest.raises(UserError, match="slide_friction 0"):
+        TrialSettings(rolling=True, slide_friction=0)
+    with pytest.raises(UserError, match="spin_friction 0.5"):
+        TrialSettings(rolling=True, spin_friction=0.5)

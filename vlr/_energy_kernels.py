@@ -27,12 +27,13 @@ OK, NONFINITE, NO_CONVERGENCE, JUMP, INACTIVE = 0, 1, 2, 3, 4
 
 # Indices into the float parameter vector `prm`.
 (P_KC, P_KLIM, P_TOL_TH, P_TOL_P, P_MAX_DTH, P_MAX_DP, P_JUMP_TH, P_JUMP_P, P_MU0, P_RHO,
- P_KSPIN) = range(11)
-N_PRM = 11
+ P_KSPIN, P_SLIDE_FRICTION, P_SPIN_FRICTION, P_SPIN_EPS) = range(14)
+N_PRM = 14
 # Layout of a rolling frame (one per contact): local centre of curvature in O (3), contact
-# normal in the palm frame (3), the finger's summed joint angles (1) and the object rotation
-# R_PO (9, row-major) at the start of the solve.
-RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, N_RL = 0, 3, 6, 7, 16
+# normal in the palm frame (3), the finger's summed joint angles (1), the object rotation
+# R_PO (9, row-major) at the start of the solve, and the contact's normal force then (1) [N]
+# (it sets the friction's limits).
+RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, RL_FORCE, N_RL = 0, 3, 6, 7, 16, 17
 
 
 @njit(cache=True)
@@ -146,11 +147,11 @@ def _pair(i, k_n, px, py, pz, ax, ay, az, gam, Gam, iso, rb, R, qy, qz, jac, M, 
 
 
 @njit(cache=True)
-def _spin(i, k_n, th, rl, R, rb, ks, vk, gA, A, B, gC, C):
-    """Spin of the object relative to finger i's distal link about the contact normal N,
-    since the start of the solve, as an elastic penalty 1/2 k_s s^2 (a pad's torsional
-    stiffness; 0 = free spin). s = N . (omega_O - omega_D): omega_O = vee(sym(R R0^T)),
-    omega_D = -(sum theta - sum theta_0) x_F. Exact gradient, Gauss-Newton Hessian."""
+def _spin_rate(i, k_n, th, rl, R, rb, vk):
+    """Spin s of the object relative to finger i's distal link about the contact normal N,
+    since the start of the solve: s = N . (omega_O - omega_D), omega_O = vee(sym(R R0^T)),
+    omega_D = -(sum theta - sum theta_0) x_F. Returns (s, ds/dtheta_k (the same for every
+    joint of the finger), ds/dw_0, ds/dw_1, ds/dw_2); vk[3:6] is scratch."""
     nx, ny, nz = rl[i, RL_NORMAL], rl[i, RL_NORMAL + 1], rl[i, RL_NORMAL + 2]
     # W = R R0^T
     W = vk[3:6]
@@ -166,8 +167,8 @@ def _spin(i, k_n, th, rl, R, rb, ks, vk, gA, A, B, gC, C):
         phi += th[i, k]
     cx = nx * rb[0, 0] + ny * rb[1, 0] + nz * rb[2, 0]
     s = nx * om0 + ny * om1 + nz * om2 + (phi - rl[i, RL_PHI]) * cx
-    # d omega / d w_b = vee(sym(R [e_b]x R0^T)); its projection on N -> jw[b]
-    jw = vk[2]
+    # d omega / d w_b = vee(sym(R [e_b]x R0^T)); its projection on N
+    jw0 = jw1 = jw2 = 0.0
     for b in range(3):
         # R [e_b]x: column c of [e_b]x is e_b x e_c
         Q = vk[3:6]  # scratch: R [e_b]x R0^T (W is no longer needed)
@@ -182,19 +183,32 @@ def _spin(i, k_n, th, rl, R, rb, ks, vk, gA, A, B, gC, C):
                         sgn = 1.0 if (d - f) % 3 == 1 else -1.0  # -eps(d, f, b)
                         t += R[a, d] * sgn * rl[i, RL_ROT + 3 * c + f]
                 Q[a, c] = t
-        jw[b] = 0.5 * (nx * (Q[2, 1] - Q[1, 2]) + ny * (Q[0, 2] - Q[2, 0])
-                       + nz * (Q[1, 0] - Q[0, 1]))
+        jb = 0.5 * (nx * (Q[2, 1] - Q[1, 2]) + ny * (Q[0, 2] - Q[2, 0])
+                    + nz * (Q[1, 0] - Q[0, 1]))
+        if b == 0:
+            jw0 = jb
+        elif b == 1:
+            jw1 = jb
+        else:
+            jw2 = jb
+    return s, cx, jw0, jw1, jw2
+
+
+@njit(cache=True)
+def _spin_apply(i, k_n, f1, f2, cx, jw0, jw1, jw2, gA, A, B, gC, C):
+    """Accumulate an energy f(s) of the spin: gradient f'(s) J, Gauss-Newton Hessian
+    f''(s) J J^T (J from `_spin_rate`)."""
+    jw = (jw0, jw1, jw2)
     for k in range(k_n):
-        gA[i, k] += ks * s * cx
+        gA[i, k] += f1 * cx
         for m in range(k_n):
-            A[i, k, m] += ks * cx * cx
+            A[i, k, m] += f2 * cx * cx
         for b in range(3):
-            B[i, k, 3 + b] += ks * cx * jw[b]
+            B[i, k, 3 + b] += f2 * cx * jw[b]
     for b in range(3):
-        gC[3 + b] += ks * s * jw[b]
+        gC[3 + b] += f1 * jw[b]
         for c in range(3):
-            C[3 + b, 3 + c] += ks * jw[b] * jw[c]
-    return 0.5 * ks * s * s
+            C[3 + b, 3 + c] += f2 * jw[b] * jw[c]
 
 
 @njit(cache=True)
@@ -285,14 +299,56 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
             v0, v1, v2 = _separation(base_pos[i], rb, cfx, cfy, cfz, p, R, ax, ay, az)
             vn = v0 * nx + v1 * ny + v2 * nz
             t0, t1, t2 = v0 - vn * nx, v1 - vn * ny, v2 - vn * nz
-            e += 0.5 * kc * (t0 * t0 + t1 * t1 + t2 * t2)
+            tn2 = t0 * t0 + t1 * t1 + t2 * t2
             nv = (nx, ny, nz)
             tv = (t0, t1, t2)
             G = vk[3:6]
-            for a in range(3):
-                gam[a] = kc * tv[a]
-                for b in range(3):
-                    G[a, b] = kc * ((1.0 if a == b else 0.0) - nv[a] * nv[b])
+            # Friction (METHOD.md 8.2; `MotionConfig.slide_friction`, `spin_friction`). The
+            # normal force N is the contact's at the start of the solve, updated while the
+            # grasp wedges (`_update_normal_forces`). The slide is a Huber function of the
+            # tangential stretch t: the stick spring while k_c |t| <= mu N, the slip's
+            # dissipation mu N |t| beyond (the Moreau envelope of elastic stick and plastic
+            # slip, so that one minimization is the incremental elasto-plastic step).
+            mu = prm[P_SLIDE_FRICTION]
+            mu_t = prm[P_SPIN_FRICTION]
+            spin_on = prm[P_KSPIN] > 0.0 or mu_t > 0.0
+            s_sp = cxs = j0 = j1 = j2 = 0.0
+            f1 = f2 = 0.0
+            if spin_on:
+                s_sp, cxs, j0, j1, j2 = _spin_rate(i, k_n, th, rl, R, rb, vk)
+            cap = mu * rl[i, RL_FORCE] if math.isfinite(mu) else math.inf
+            if kc * kc * tn2 <= cap * cap:
+                e += 0.5 * kc * tn2
+                for a in range(3):
+                    gam[a] = kc * tv[a]
+                    for b in range(3):
+                        G[a, b] = kc * ((1.0 if a == b else 0.0) - nv[a] * nv[b])
+            else:
+                tn = math.sqrt(tn2)
+                e += cap * tn - 0.5 * cap * cap / kc
+                h = cap / tn
+                for a in range(3):
+                    gam[a] = h * tv[a]
+                    for b in range(3):
+                        G[a, b] = h * ((1.0 if a == b else 0.0) - nv[a] * nv[b]
+                                       - tv[a] * tv[b] / tn2)
+            if mu_t > 0.0:
+                # Torsional friction: tau_max |s|, tau_max = mu_t N, smoothed to
+                # tau_max (sqrt(s^2 + eps^2) - eps) so that Newton sees a C2 energy. (An
+                # elliptic cone coupling it with the slide, as MuJoCo's, was measured by
+                # `vlr gap`: no better on average, and 3 of 30 wine glass solves failed.)
+                tau = mu_t * rl[i, RL_FORCE]
+                eps = prm[P_SPIN_EPS]
+                r = math.sqrt(s_sp * s_sp + eps * eps)
+                e += tau * (r - eps)
+                f1 += tau * s_sp / r
+                f2 += tau * eps * eps / (r * r * r)
+            if spin_on:
+                # The pad's elastic torsional stiffness (`MotionConfig.spin_stiffness`).
+                ks = prm[P_KSPIN]
+                e += 0.5 * ks * s_sp * s_sp
+                f1 += ks * s_sp
+                f2 += ks
             _pair(i, k_n, cfx, cfy, cfz, ax, ay, az, gam, G, 0.0, rb, R, qy, qz, jac, M,
                   vk[2], vk[0], gA, A, B, gC, C)
             # Pad centre (fixed in D) to the local centre of curvature (fixed in O).
@@ -316,8 +372,8 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                                     + (reach / dist) * dv[a] * dv[b])
             _pair(i, k_n, px, py, pz, ox, oy, oz, gam, G, 0.0, rb, R, qy, qz, jac, M,
                   vk[2], vk[0], gA, A, B, gC, C)
-            if prm[P_KSPIN] > 0.0:
-                e += _spin(i, k_n, th, rl, R, rb, prm[P_KSPIN], vk, gA, A, B, gC, C)
+            if spin_on:
+                _spin_apply(i, k_n, f1, f2, cxs, j0, j1, j2, gA, A, B, gC, C)
         # Eq. 8 as a stiff penalty: the contact (fixed in D) stays at its anchor (fixed in O).
         elif flags[CONTACTS] != 0:
             ax, ay, az = anc[i, 0], anc[i, 1], anc[i, 2]
@@ -355,6 +411,25 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                     h -= gc
                 C[3 + b, 3 + c] -= omass * h
     return e
+
+
+@njit(cache=True)
+def _update_normal_forces(th, seg, nrm, rl, p, R, base_pos, base_rot, pad_xy, pad_r, prm,
+                          sphi, cphi, qy, qz):
+    """Each contact's normal force at the current configuration into rl[:, RL_FORCE]: the
+    friction's limits follow the grasp as it wedges (the rolling term's normal penalty)."""
+    n_f, k_n = th.shape
+    for i in range(n_f):
+        _finger_chain(th[i], seg[i], nrm[i], pad_xy[i, 0], pad_xy[i, 1], pad_r[i], sphi, cphi,
+                      qy, qz)
+        s_last, c_last = sphi[k_n - 1], cphi[k_n - 1]
+        pcz = seg[i, k_n - 1]
+        py = qy[k_n - 1] + pad_xy[i, 1] * c_last + pcz * s_last
+        pz = qz[k_n - 1] - pad_xy[i, 1] * s_last + pcz * c_last
+        d0, d1, d2 = _separation(base_pos[i], base_rot[i], pad_xy[i, 0], py, pz, p, R,
+                                 rl[i, 0], rl[i, 1], rl[i, 2])
+        g = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - (prm[P_RHO] + pad_r[i])
+        rl[i, RL_FORCE] = prm[P_KC] * max(0.0, -g)
 
 
 @njit(cache=True)
@@ -478,6 +553,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
     n_f, k_n = theta.shape[1], theta.shape[2]
     th = theta[q]
     rl = roll[q] if flags[ROLLING] != 0 else roll[0]
+    lagged = flags[ROLLING] != 0
     p = pos[q]
     R = rot[q]
     for i in range(n_f):
@@ -561,6 +637,13 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                 for b in range(3):
                     R[a, b] = R_t[a, b]
             e = e_t
+            if lagged and it <= max_iter // 2 and math.isfinite(prm[P_SLIDE_FRICTION]):
+                _update_normal_forces(th, seg[q], nrm[q], rl, p, R, base_pos, base_rot,
+                                      pad_xy, pad_r, prm, sphi, cphi, qy, qz)
+                e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
+                              base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy,
+                              pad_r, omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi,
+                              cphi, qy, qz, jac, M, vk)
             if t == 1.0:
                 mu = max(mu * 0.1, 1e-12)
             if small or (t * big_th < prm[P_TOL_TH] and t * big_p < prm[P_TOL_P]

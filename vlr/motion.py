@@ -32,6 +32,7 @@ Energy terms are named in `MotionConfig.terms`; each has a numba kernel in
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, fields, replace
 
 import numpy as np
@@ -64,6 +65,10 @@ TERMS: dict[str, int] = {
     "rolling": kern.ROLLING,
 }
 
+# A frictional solve first relaxes the grasp at the old command, with this many times the
+# iterations of a solve (`MotionModel._solve`).
+RELAX_ITERATIONS = 8
+
 STATUS = {kern.OK: "ok", kern.NONFINITE: "non-finite", kern.NO_CONVERGENCE: "no convergence",
           kern.JUMP: "jump", kern.INACTIVE: "inactive"}
 
@@ -94,6 +99,21 @@ class MotionConfig:
             is exact only while the pad turns little (measured by `vlr gap`).
         spin_stiffness: with rolling, the pad's torsional stiffness about the contact
             normal [N m/rad]; 0 lets the object spin freely on the pads.
+        slide_friction: with rolling, the pads' sliding friction coefficient mu: a contact
+            sticks (the penalty k_c) until its tangential force reaches mu times its normal
+            force, then slides; after each solve its stretch is returned onto the cone
+            (`vlr.surface.roll_contacts`). The normal force is each contact's at the start
+            of the solve (its penalty's stretch). inf: contacts never slide (the model
+            before friction). The sim's pads have 1.0 (`sim.pads.SLIDE_FRICTION`).
+        spin_friction: with rolling, the pads' torsional friction coefficient mu_t [m]: a
+            pad sticks about its contact normal until the spin torque reaches mu_t times
+            its normal force, then slips (rate-independent Coulomb friction as an
+            incremental dissipation potential, `vlr._energy_kernels._spin`). The sim's pads
+            have 1 mm (`sim.pads.TORSION_FRICTION`); 0 lets them spin freely.
+            Friction acts on a command change (`solve(..., u_from=)`) only: a settle has no
+            history, so its contacts stick and spin freely as before.
+        spin_smoothing: the spin [rad] over which the friction's |s| is rounded off
+            (Newton needs a smooth energy); the stick's compliance is tau_max over it.
         follow_substeps: a particle whose solve of a command change (`solve(...,
             u_from=)`) does not converge or leaves the jump limits is solved again from
             its start in this many equal steps, each held to the jump limits: a large but
@@ -107,6 +127,9 @@ class MotionConfig:
                               "object_gravity", "contacts")
     rolling_substeps: int = 4
     spin_stiffness: float = 0.0
+    slide_friction: float = math.inf
+    spin_friction: float = 0.0
+    spin_smoothing: float = 1e-3
     follow_substeps: int = 16
     contact_stiffness: float = 1e6
     limit_stiffness: float = 100.0
@@ -130,6 +153,13 @@ class MotionConfig:
                              "it needs 'contacts' too")
         if not (np.isfinite(self.spin_stiffness) and self.spin_stiffness >= 0):
             raise ValueError(f"spin_stiffness {self.spin_stiffness!r} N m/rad must be >= 0")
+        if not (self.slide_friction > 0):
+            raise ValueError(f"slide_friction {self.slide_friction!r} must be > 0 (inf: no "
+                             "sliding)")
+        if not (np.isfinite(self.spin_friction) and self.spin_friction >= 0):
+            raise ValueError(f"spin_friction {self.spin_friction!r} m must be >= 0")
+        if not (np.isfinite(self.spin_smoothing) and self.spin_smoothing > 0):
+            raise ValueError(f"spin_smoothing {self.spin_smoothing!r} rad must be > 0")
         if not (isinstance(self.follow_substeps, int) and self.follow_substeps >= 0):
             raise ValueError(f"follow_substeps {self.follow_substeps!r} must be an integer "
                              ">= 0")
@@ -165,6 +195,9 @@ class MotionConfig:
         prm[kern.P_JUMP_P] = self.jump_pos
         prm[kern.P_MU0] = self.mu0
         prm[kern.P_KSPIN] = self.spin_stiffness
+        prm[kern.P_SLIDE_FRICTION] = self.slide_friction
+        prm[kern.P_SPIN_FRICTION] = self.spin_friction
+        prm[kern.P_SPIN_EPS] = self.spin_smoothing
         return prm
 
 
@@ -307,18 +340,22 @@ class MotionModel:
         self._prm = self._params(self.config)
         self._no_roll = np.zeros((1, model.n_fingers, kern.N_RL))
 
-    def _params(self, cfg: MotionConfig) -> np.ndarray:
+    def _params(self, cfg: MotionConfig, history: bool = True) -> np.ndarray:
+        """The kernel's parameters; without `history` (a settle) without friction."""
+        if not history:
+            cfg = replace(cfg, slide_friction=math.inf, spin_friction=0.0)
         prm = cfg.params()
         prm[kern.P_RHO] = self.obj.surface.kernel_radius
         return prm
 
     def rolling_frames(self, state: ParticleState,
                        normals_o: np.ndarray | None = None) -> np.ndarray:
-        """(P, N, 16) what the rolling term holds fixed during a solve: each contact's local
+        """(P, N, 17) what the rolling term holds fixed during a solve: each contact's local
         centre of curvature in O, a - rho m, its normal in the palm frame, R m (m: the
-        object's outward normal at the contact, in O), the finger's summed joint angles and
-        the object's rotation (for the spin term). `normals_o`: m if already computed
-        (`vlr.surface.surface_normals`)."""
+        object's outward normal at the contact, in O), the finger's summed joint angles, the
+        object's rotation (for the spin term) and the contact's normal force
+        (`normal_forces`; it sets the friction's limits). `normals_o`: m if already
+        computed (`vlr.surface.surface_normals`)."""
         m = (surface_normals(self.model, state.theta, state.normals, state.rot)
              if normals_o is None else normals_o)
         out = np.empty(m.shape[:2] + (kern.N_RL,))
@@ -326,8 +363,20 @@ class MotionModel:
             state.anchors - self.obj.surface.kernel_radius * m)
         out[..., kern.RL_NORMAL:kern.RL_NORMAL + 3] = np.einsum("pab,pnb->pna", state.rot, m)
         out[..., kern.RL_PHI] = state.theta.sum(axis=-1)
-        out[..., kern.RL_ROT:] = state.rot.reshape(-1, 1, 9)
+        out[..., kern.RL_ROT:kern.RL_ROT + 9] = state.rot.reshape(-1, 1, 9)
+        out[..., kern.RL_FORCE] = self.normal_forces(state, out[..., :3])
         return out
+
+    def normal_forces(self, state: ParticleState, centres_o: np.ndarray) -> np.ndarray:
+        """(P, N) each contact's normal force in the rolling term [N]: k_c times how far the
+        pad sphere sinks into the object's local sphere (centres `centres_o` in O, radius
+        rho), 0 where they part."""
+        centre = contact_points(self.model, state.theta, np.zeros_like(state.normals),
+                                state.segments)
+        local = state.pos[:, None, :] + np.einsum("pab,pnb->pna", state.rot, centres_o)
+        gap = (np.linalg.norm(centre - local, axis=-1)
+               - (self.obj.surface.kernel_radius + self.model.pad_radius))
+        return self.config.contact_stiffness * np.maximum(0.0, -gap)
 
     def solve(self, state: ParticleState, u: np.ndarray, config: MotionConfig | None = None,
               u_from: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -359,7 +408,8 @@ class MotionModel:
     def _solve(self, state: ParticleState, u: np.ndarray, cfg: MotionConfig, custom: bool,
                u_from: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """One solve of every valid particle at u (`solve`), rolled in substeps if asked."""
-        prm = self._params(cfg) if custom else self._prm
+        history = u_from is not None
+        prm = self._params(cfg, history) if (custom or not history) else self._prm
         flags = cfg.flags() if custom else self._flags
         u = np.ascontiguousarray(u, dtype=float).reshape(self.model.n_fingers)
         steps = cfg.rolling_substeps if (cfg.rolling and u_from is not None) else 1
@@ -369,18 +419,36 @@ class MotionModel:
         status = np.empty(state.n, dtype=np.int8)
         iters = np.zeros(state.n, dtype=np.int32)
         it = np.empty(state.n, dtype=np.int32)
-        for target in targets:
+        step_status = np.empty(state.n, dtype=np.int8)
+        budgets = [int(cfg.max_iter)] * len(targets)
+        if history and cfg.rolling and math.isfinite(cfg.slide_friction):
+            # A settle holds its contacts whatever the force. Friction first returns their
+            # stretch onto the cone, as the world's contacts would have slid, and lets the
+            # grasp find its frictional equilibrium at the old command: after a settle that
+            # can be a large move (measured: a joint 11 degrees, 170 iterations), after a
+            # frictional solve it takes one or two iterations.
+            self.roll(state, surface_normals(self.model, state.theta, state.normals,
+                                             state.rot), cfg.slide_friction)
+            targets = [np.ascontiguousarray(u_from, dtype=float)] + targets
+            budgets = [RELAX_ITERATIONS * int(cfg.max_iter)] + budgets
+        for j, target in enumerate(targets):
             before = surface_normals(self.model, state.theta, state.normals, state.rot) \
                 if cfg.rolling else None
             roll = self.rolling_frames(state, before) if cfg.rolling else self._no_roll
             kern.solve_batch(state.theta, state.segments, state.normals, state.anchors,
                              roll, state.pos, state.rot, state.stiffness, state.tendon, target,
-                             *self._shared, flags, prm, int(cfg.max_iter), state.valid,
-                             status, it)
+                             *self._shared, flags, prm, budgets[j], state.valid,
+                             step_status, it)
             iters += it
-            state.valid &= status == kern.OK
+            # A particle keeps the status of the substep it failed in (later ones say only
+            # "inactive"), so that `_follow` sees a jump or no convergence as such.
+            if j == 0:
+                status[:] = step_status
+            else:
+                status[state.valid] = step_status[state.valid]
+            state.valid &= step_status == kern.OK
             if cfg.rolling:
-                self.roll(state, before)
+                self.roll(state, before, cfg.slide_friction if history else math.inf)
         return status, iters
 
     def _follow(self, state: ParticleState, start: ParticleState, u: np.ndarray,
@@ -411,15 +479,17 @@ class MotionModel:
             state.put(idx[ok], sub.take(np.flatnonzero(ok)))
             status[idx[ok]] = kern.OK
 
-    def roll(self, state: ParticleState, normals_before: np.ndarray) -> None:
+    def roll(self, state: ParticleState, normals_before: np.ndarray,
+             slide_friction: float = math.inf) -> None:
         """Move the valid particles' contacts to where their pads now touch the object
-        (`vlr.surface.roll_contacts`)."""
+        (`vlr.surface.roll_contacts`), a contact's stretch returned onto its friction cone
+        (`slide_friction`)."""
         ok = state.valid
         if not ok.any():
             return
         n, a = roll_contacts(self.model, self.obj.surface, state.theta[ok], state.normals[ok],
                              state.anchors[ok], state.pos[ok], state.rot[ok],
-                             state.segments[ok], normals_before[ok])
+                             state.segments[ok], normals_before[ok], slide_friction)
         if ok.all():
             state.normals, state.anchors = n, a
         else:
@@ -498,13 +568,24 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
         centre = contact_points(m, theta, np.zeros_like(state.normals[q]), state.segments[q])
         gap = np.linalg.norm(centre - (pos + roll[:, :3] @ rot.T), axis=-1) \
             - (obj.surface.kernel_radius + m.pad_radius)
-        e += 0.5 * cfg.contact_stiffness * (np.sum(tangential**2) + np.sum(gap**2))
-        if cfg.spin_stiffness > 0:
+        kc = cfg.contact_stiffness
+        e += 0.5 * kc * np.sum(gap**2)
+        spin = np.zeros(len(roll))
+        if cfg.spin_stiffness > 0 or cfg.spin_friction > 0:
             w = rot @ roll[0, 7:16].reshape(3, 3).T
             omega = 0.5 * np.array([w[2, 1] - w[1, 2], w[0, 2] - w[2, 0], w[1, 0] - w[0, 1]])
             spin = n @ omega + (theta.sum(axis=-1) - roll[:, 6]) * np.einsum(
                 "na,na->n", n, m.base_rot[:, :, 0])
-            e += 0.5 * cfg.spin_stiffness * np.sum(spin**2)
+        e += 0.5 * cfg.spin_stiffness * np.sum(spin**2)
+        t2 = np.sum(tangential**2, axis=-1)
+        mu, mu_t = cfg.slide_friction, cfg.spin_friction
+        if mu_t > 0:
+            eps = cfg.spin_smoothing
+            e += np.sum(mu_t * roll[:, 16] * (np.sqrt(spin**2 + eps**2) - eps))
+        cap = mu * roll[:, 16] if math.isfinite(mu) else np.full(len(roll), math.inf)
+        z = np.sqrt(t2)
+        with np.errstate(invalid="ignore"):
+            e += np.sum(np.where(kc * z <= cap, 0.5 * kc * t2, cap * z - 0.5 * cap**2 / kc))
     elif "contacts" in cfg.terms:
         c = contact_points(m, theta, state.normals[q], state.segments[q])
         target = pos + state.anchors[q] @ rot.T

@@ -98,7 +98,7 @@ def surface_normals(model: HandModel, theta: np.ndarray, normals: np.ndarray,
 def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
                   normals: np.ndarray, anchors: np.ndarray, pos: np.ndarray, rot: np.ndarray,
                   segments: np.ndarray, normals_before: np.ndarray,
-                  ) -> tuple[np.ndarray, np.ndarray]:
+                  slide_friction: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
     """Move each contact to where the pad now touches the object's local surface.
 
     Args:
@@ -106,6 +106,10 @@ def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
             solve (`vlr.motion.ParticleState` arrays).
         normals_before: (P, N, 3) the object's surface normals at the contacts in O before
             that solve (`surface_normals`): material to the object, so the solve left them.
+        slide_friction: mu; a contact whose tangential stretch carries more than mu times
+            its normal force (both k_c times a stretch) has slid: its stretch is returned
+            onto the friction cone (the return mapping of elasto-plastic friction). inf: no
+            contact slides.
     Returns:
         (normals, anchors): the new pad normals in D and contact points in O. The POM pose
         is unchanged, and so are the rolling term's residuals (the pad-to-surface gap and the
@@ -123,6 +127,10 @@ def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
     rho_k = surface.kernel_radius
     gap = (np.linalg.norm(centre - (anchors - rho_k * normals_before), axis=-1, keepdims=True)
            - (rho_k + radius))
+    if math.isfinite(slide_friction):
+        cap = slide_friction * np.maximum(0.0, -gap)
+        t = np.linalg.norm(tangential, axis=-1, keepdims=True)
+        tangential = tangential * np.where(t > cap, cap / np.where(t > 0, t, 1.0), 1.0)
     m = normals_before
     if surface.kind == "plane":
         out = m

@@ -11,10 +11,11 @@ result and rebuild the table from files alone.
 
 from __future__ import annotations
 
+import math
 import numbers
 import time
 from collections.abc import Callable
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 from types import SimpleNamespace
 from typing import Any
@@ -65,6 +66,11 @@ class TrialSettings:
         prior_spread_deg: prior std of the joint angles about the nominal grasp [deg].
         rolling: rolling contacts in the filter's motion model (vlr.surface; measured by
             `vlr gap`, docs/RESULTS.md), and in the synthetic world's, which is that model.
+        slide_friction, spin_friction: with rolling, the pads' sliding friction coefficient
+            (None: contacts never slide) and torsional friction coefficient [m] (0: free
+            spin) in the filter's motion model (`vlr.motion.MotionConfig`). They are the
+            pads' material, known like their radius: the sim's are 1.0 and 0.001
+            (`sim.pads`).
         exploration: "random" actions (the paper) or "active" (vlr.active).
         config: hardware only: the hardware YAML file.
     """
@@ -85,6 +91,8 @@ class TrialSettings:
     nominal_theta_deg: tuple[float, ...] | None = None
     prior_spread_deg: float = 3.0
     rolling: bool = False
+    slide_friction: float | None = None
+    spin_friction: float = 0.0
     exploration: str = "random"
     config: str | None = None
 
@@ -112,6 +120,14 @@ class TrialSettings:
         if self.true_hand and self.backend not in ("synthetic", "sim"):
             raise UserError(f"true_hand is for the synthetic world and the sim only: the "
                             f"{self.backend} hand is what it is")
+        if self.slide_friction is not None and not self.slide_friction > 0:
+            raise UserError(f"slide_friction {self.slide_friction} must be > 0 (or none: "
+                            "contacts never slide)")
+        if not 0 <= self.spin_friction <= 0.01:
+            raise UserError(f"spin_friction {self.spin_friction} m must be in [0, 0.01]")
+        if (self.slide_friction is not None or self.spin_friction) and not self.rolling:
+            raise UserError("slide_friction and spin_friction act on rolling contacts: set "
+                            "rolling too")
         if not self.prior_spread_deg > 0:
             raise UserError(f"prior_spread_deg {self.prior_spread_deg} must be > 0")
         object.__setattr__(self, "unknowns", tuple(self.unknowns))
@@ -140,9 +156,11 @@ class TrialSettings:
         for name in ("particles", "seed", "max_iterations", "min_iterations"):
             if not is_int(getattr(self, name)):
                 raise bad(name, "an integer")
-        for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg", "sigma_motion"):
+        for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg", "sigma_motion",
+                     "slide_friction", "spin_friction"):
             v = getattr(self, name)
-            if not (is_real(v) or (v is None and name in ("sigma_pos_mm", "sigma_rot_deg"))):
+            if not (is_real(v) or (v is None and name in ("sigma_pos_mm", "sigma_rot_deg",
+                                                          "slide_friction"))):
                 raise bad(name, "a number")
         if not isinstance(self.rolling, bool):
             raise bad("rolling", "true or false")
@@ -184,6 +202,15 @@ class TrialSettings:
         """(sigma_pos [mm], sigma_rot [deg]) in effect."""
         pos, rot = DEFAULT_SIGMA.get(self.backend, DEFAULT_SIGMA["sim"])
         return (self.sigma_pos_mm or pos, self.sigma_rot_deg or rot)
+
+    def motion_config(self):
+        """The filter's motion model settings (`vlr.motion.MotionConfig`)."""
+        from vlr.motion import MotionConfig
+
+        cfg = MotionConfig().with_rolling(self.rolling)
+        return replace(cfg, slide_friction=(math.inf if self.slide_friction is None
+                                            else float(self.slide_friction)),
+                       spin_friction=float(self.spin_friction))
 
 
 @dataclass
@@ -229,7 +256,7 @@ def _true_stiffness(settings: TrialSettings, model) -> dict[tuple[int, int], flo
 def open_world(settings: TrialSettings) -> World:
     """Open the trial's world (module docstring). The caller closes it."""
     from vlr.kinematics import HandModel
-    from vlr.motion import MotionConfig, ObjectParams
+    from vlr.motion import ObjectParams
     from vlr.spec import load_hand, load_object
     from vlr.synthetic import SyntheticConfig, SyntheticWorld, nominal_grasp
 
@@ -242,7 +269,7 @@ def open_world(settings: TrialSettings) -> World:
     # pads roll while the grasp settles, and the distal joints settle 25-30 degrees from the
     # pinned equilibrium (measured, synthetic seed 0): a pinned guess would centre the
     # prior there, away from every rolling grasp.
-    motion = MotionConfig().with_rolling(settings.rolling)
+    motion = settings.motion_config()
     guess = SyntheticConfig(motion=motion)
     if settings.nominal_theta_deg is not None:
         n = len(settings.nominal_theta_deg)
@@ -311,13 +338,10 @@ def identify_config(settings: TrialSettings, model):
 
     check_unknowns(settings, model)
     sp, sr = settings.sigma
-    from vlr.motion import MotionConfig
-
     # Rolling contacts halve the sim's per-action gap (vlr gap), but in closed loop they
     # are not yet a clear win and cost 2-3x the time (docs/RESULTS.md 3): off by default.
-    rolling = settings.rolling
     fcfg = FilterConfig(n_particles=settings.particles, seed=settings.seed,
-                        motion=MotionConfig().with_rolling(rolling),
+                        motion=settings.motion_config(),
                         unknowns=settings.unknowns,
                         theta_spread=float(np.radians(settings.prior_spread_deg)),
                         observation=ObservationModel(sigma_pos=sp * 1e-3,

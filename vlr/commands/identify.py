@@ -49,6 +49,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--rolling", action="store_true",
                    help="rolling contacts in the filter's motion model (vlr gap measures "
                    "them; off by default, docs/RESULTS.md)")
+    p.add_argument("--slide-friction", type=float, default=None, metavar="MU",
+                   help="with --rolling: the pads' sliding friction coefficient (default: "
+                   "contacts never slide; the sim's pads have 1.0)")
+    p.add_argument("--spin-friction", type=float, default=0.0, metavar="MU_T",
+                   help="with --rolling: the pads' torsional friction coefficient [m] "
+                   "(default 0: free spin; the sim's pads have 0.001)")
     p.add_argument("--exploration", choices=("random", "active"), default="random",
                    help="random actions (the paper) or active: the candidate whose predicted "
                    "POM poses disagree most across the particles")
@@ -120,7 +126,8 @@ def run(args: argparse.Namespace) -> int:
         min_iterations=args.min_iterations, sigma_pos_mm=args.sigma_pos_mm,
         sigma_rot_deg=args.sigma_rot_deg, sigma_motion=args.sigma_motion, config=args.config,
         nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg,
-        rolling=args.rolling, exploration=args.exploration)
+        rolling=args.rolling, slide_friction=args.slide_friction,
+        spin_friction=args.spin_friction, exploration=args.exploration)
     bar = None
 
     def progress(rec) -> None:
