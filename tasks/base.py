@@ -234,7 +234,9 @@ class HandTaskEnv(gym.Env):
                                            cfg, watch=lambda pf, rec: box.update(pf=pf))
         except FloatingPointError:
             # Every particle's solve failed (too few particles, or a prior that misses the
-            # grasp): the episode goes on with the VLR lost, `filter_lost` says so.
+            # grasp): the episode goes on with the VLR lost, `filter_lost` says so. Before
+            # the filter exists (a prior that settled in none of its draws) there is no VLR
+            # to go on with: the filter's error says what failed.
             if "pf" not in box:
                 raise
             self.identification = None

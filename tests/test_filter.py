@@ -121,6 +121,36 @@ def test_filter_recovers_when_every_particle_fails():
     assert pf.state.valid.mean() > 0.5 and np.isfinite(rec.ci_deg)
 
 
+def test_a_prior_that_does_not_settle_is_drawn_again_then_named(monkeypatch):
+    """A draw of which no particle settles at the grasp command is drawn again (a small
+    filter's unlucky draw is not a lost grasp); a prior that never settles is one error
+    that says what failed, not a bare zero-likelihood error from the weights."""
+    from vlr.motion import MotionModel
+
+    model = HandModel.from_spec(load_hand("modelo"))
+    obj = ObjectParams(mass=0.12, com=(0.0, 0.0, 0.03))
+    world = SyntheticWorld(model, obj, SyntheticConfig(seed=0))
+    u = world.grasp()
+    solve = MotionModel.solve
+    failures = {"left": 1}
+
+    def unlucky(self, state, *args, **kw):
+        out = solve(self, state, *args, **kw)
+        if failures["left"] > 0:
+            failures["left"] -= 1
+            state.valid[:] = False
+        return out
+
+    monkeypatch.setattr(MotionModel, "solve", unlucky)
+    pf = ParticleFilter(model, obj, FilterConfig(n_particles=200, seed=0))
+    rec = pf.initialize(world.observe(), u, world.nominal.theta, world.nominal.contact)
+    assert pf.prior_redraws == 1 and pf.state.valid.all() and rec.ess > 0
+    failures["left"] = 10
+    pf = ParticleFilter(model, obj, FilterConfig(n_particles=200, seed=0))
+    with pytest.raises(FloatingPointError, match="none of the 200 prior particles settled"):
+        pf.initialize(world.observe(), u, world.nominal.theta, world.nominal.contact)
+
+
 def test_a_particle_at_the_truth_stays_there(modelo):
     """The truth, planted as one particle, must come through an update exactly: resampling
     keeps the first copy of each parent un-jittered, and re-anchoring keeps its grasp force

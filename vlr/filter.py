@@ -190,6 +190,11 @@ def interval_width_deg(theta_samples: np.ndarray) -> float:
 
 # --------------------------------------------------------------------------- config and records
 
+# A prior of which no particle settles at the grasp command is drawn again this many times in
+# all: a small filter's unlucky draw (1000 particles in a task's check) is not a lost grasp.
+PRIOR_DRAWS = 3
+
+
 @dataclass(frozen=True)
 class FilterConfig:
     """Particle filter settings (units in brackets).
@@ -301,6 +306,7 @@ class ParticleFilter:
         self.project_status = np.zeros(5, dtype=np.int64)
         self.newton_iterations: dict[str, float] = {}
         self.recoveries = 0  # times every particle failed and the prior was resampled
+        self.prior_redraws = 0  # prior draws of which no particle settled (`initialize`)
         self._before: tuple[np.ndarray, np.ndarray] | None = None  # POM poses before an action
         # Seconds per phase of the last iteration (motion, observation, weights, resampling,
         # jitter, summary), for `vlr bench`.
@@ -348,7 +354,17 @@ class ParticleFilter:
             command: u_0 (N,) [m].
             nominal_theta: (N, K) [rad]; nominal_contact: (N, 2) (alpha, beta) [rad].
         """
-        self._sample_prior(observation, command, nominal_theta, nominal_contact)
+        for _ in range(PRIOR_DRAWS):
+            self._sample_prior(observation, command, nominal_theta, nominal_contact)
+            if self.state.valid.any():
+                break
+            self.prior_redraws += 1
+        else:
+            raise FloatingPointError(
+                f"none of the {self.config.n_particles} prior particles settled at the grasp "
+                f"command in {PRIOR_DRAWS} draws (solve status counts "
+                f"{self.init_status.tolist()}): the nominal guess or its spread misses this "
+                "grasp, or the filter is too small")
         return self._update(observation)
 
     def _sample_prior(self, observation: PoseObservation, command: np.ndarray,
