@@ -103,6 +103,43 @@ def test_step_holds_a_tendon_at_its_bound_and_solves_for_the_others():
     np.testing.assert_allclose(du[2], 0.1e-3, rtol=1e-6)
 
 
+def test_a_tendon_that_reverses_takes_smaller_steps_until_it_keeps_its_sign():
+    """A step that overshoots chatters: a 1-D plant that moves twice what the Jacobian says
+    (a slip the VLR underestimates) flips the error's sign every step at gain 1, for ever.
+    With `reversal_shrink` the chatter's steps shrink and the error ends small; a tendon
+    that then keeps its sign grows its steps back."""
+    jac = np.zeros((6, 1))
+    jac[0, 0] = 2.0                               # the VLR: 2 mm of POM per mm of tendon
+
+    def run(shrink: float) -> tuple[float, JacobianController]:
+        ctl = JacobianController(ControllerConfig(rows="position", method="dls",
+                                                  damping=1e-6, gain=1.0, max_step=1e-3,
+                                                  max_motion_pos=1.0,
+                                                  reversal_shrink=shrink))
+        x, target = 0.0, 0.3e-3
+        ctl.smallest = 1.0
+        for _ in range(20):
+            du = float(ctl.step(jac, np.array([target - x, 0, 0, 0, 0, 0]))[0])
+            x += 4.0 * du                         # the plant: 4 mm per mm
+            if ctl.step_scale is not None:
+                ctl.smallest = min(ctl.smallest, float(ctl.step_scale[0]))
+        return abs(target - x), ctl
+
+    plain, _ = run(1.0)
+    damped, ctl = run(0.5)
+    assert plain == pytest.approx(0.3e-3)         # it never settles
+    assert damped < 0.01 * plain
+    assert ctl.smallest <= 0.5
+    ctl.step(jac, np.array([-1e-3, 0, 0, 0, 0, 0]))
+    ctl.step(jac, np.array([1e-3, 0, 0, 0, 0, 0]))   # a reversal shrinks the scale
+    assert ctl.step_scale[0] < 1.0
+    for _ in range(4):                           # a consistent sign grows the scale back
+        ctl.step(jac, np.array([1e-3, 0, 0, 0, 0, 0]))
+    assert ctl.step_scale[0] == 1.0
+    with pytest.raises(ValueError, match="reversal_shrink 0"):
+        ControllerConfig(reversal_shrink=0.0)
+
+
 def test_config_rejects_unknown_rows_and_methods():
     with pytest.raises(ValueError, match="rows"):
         ControllerConfig(rows="yaw")

@@ -93,6 +93,11 @@ class ControllerConfig:
             the Jacobian predicts for it is at most this [m] ...
         max_motion_rot: ... and this [rad]. Where the grasp is very sensitive (a tendon
             that tips the object by degrees per 0.1 mm) a full step would overshoot.
+        reversal_shrink: a tendon whose step reverses its previous step's sign has its
+            steps scaled by this from then on (ours, as in Rprop); each step that keeps its
+            sign grows the scale back by 1 / sqrt(this), up to 1. Stick-slip at the contacts
+            makes a proportional step chatter about a target it cannot hold (docs/TASKS.md);
+            1 turns it off.
     """
 
     rows: str = "position"
@@ -111,6 +116,7 @@ class ControllerConfig:
     secant_min_step: float = 0.02e-3
     max_motion_pos: float = 0.5e-3
     max_motion_rot: float = float(np.radians(0.5))
+    reversal_shrink: float = 1.0
 
     def __post_init__(self) -> None:
         if self.rows not in ROWS:
@@ -124,6 +130,8 @@ class ControllerConfig:
                 and self.damping >= 0 and self.max_steps >= 0):
             raise ValueError("max_motion_pos, max_motion_rot and gain must be positive, "
                              "damping and max_steps >= 0")
+        if not 0 < self.reversal_shrink <= 1:
+            raise ValueError(f"reversal_shrink {self.reversal_shrink!r} must be in (0, 1]")
 
 
 # --------------------------------------------------------------------------- pose errors
@@ -260,6 +268,8 @@ class JacobianController:
         self.config = config or ControllerConfig()
         self.last_jacobian: np.ndarray | None = None   # J_vlr of the last `act`
         self.correction: np.ndarray | None = None      # C of the secant update (6, N)
+        self._last_step: np.ndarray | None = None      # the last `step`, for reversals
+        self.step_scale: np.ndarray | None = None      # per tendon (`reversal_shrink`)
 
     @property
     def jacobian(self) -> np.ndarray | None:
@@ -362,7 +372,22 @@ class JacobianController:
                  float(np.linalg.norm(pred[3:])) / cfg.max_motion_rot)
         if max(moved) > 1.0:
             du /= max(moved)
-        return du
+        return self._damp_reversals(du)
+
+    def _damp_reversals(self, du: np.ndarray) -> np.ndarray:
+        """Scale each tendon's step by its `step_scale`, which shrinks by `reversal_shrink`
+        when the step reverses the last one's sign and grows back while it does not."""
+        shrink = self.config.reversal_shrink
+        if shrink >= 1.0:
+            return du
+        if self.step_scale is None or self.step_scale.shape != du.shape:
+            self.step_scale = np.ones_like(du)
+        if self._last_step is not None and self._last_step.shape == du.shape:
+            reversed_ = du * self._last_step < 0
+            self.step_scale = np.where(reversed_, self.step_scale * shrink,
+                                       np.minimum(1.0, self.step_scale / np.sqrt(shrink)))
+        self._last_step = du.copy()
+        return du * self.step_scale
 
     def act(self, motion: MotionModel, state: ParticleState, command: np.ndarray,
             observation: PoseObservation, target_position: np.ndarray,

@@ -41,6 +41,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="control step (default: the task's)")
     p.add_argument("--no-secant", action="store_true",
                    help="the VLR's Jacobian alone, without the camera-fitted correction")
+    p.add_argument("--reversal-shrink", type=float, default=None, metavar="F",
+                   help="scale a tendon's steps by F each time its step reverses sign "
+                   "(vlr.controller.ControllerConfig.reversal_shrink; default: the task's)")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="an environment argument, e.g. word=SCI or letter_height=0.002")
     p.add_argument("--out", default=None, help="output folder (default runs/task-NAME)")
@@ -106,6 +109,10 @@ def run(args: argparse.Namespace) -> int:
         changes["method"] = args.method
     if args.no_secant:
         changes["secant"] = False
+    if args.reversal_shrink is not None:
+        if not 0 < args.reversal_shrink <= 1:
+            raise UserError(f"--reversal-shrink {args.reversal_shrink} must be in (0, 1]")
+        changes["reversal_shrink"] = args.reversal_shrink
     t0 = time.perf_counter()
     bar = None
     try:
@@ -136,7 +143,8 @@ def run(args: argparse.Namespace) -> int:
                   "particles": args.particles, "options": options,
                   "controller": {"method": policy.config.method,
                                  "rows": policy.config.rows, "alpha": policy.config.alpha,
-                                 "secant": policy.config.secant},
+                                 "secant": policy.config.secant,
+                                 "reversal_shrink": policy.config.reversal_shrink},
                   **task.metrics(),
                   "identification": _identification(task.identification),
                   "steps": steps,
