@@ -498,7 +498,7 @@ class MotionModel:
     def evaluate(self, state: ParticleState, q: int, u: np.ndarray,
                  roll: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
         """Energy [J], gradient (N K + 6,) and dense Hessian of particle q, in the solver's
-        coordinates (theta, dp, dw). `roll`: the (N, 6) rolling frames (`rolling_frames`),
+        coordinates (theta, dp, dw). `roll`: the (N, 17) rolling frames (`rolling_frames`),
         needed with the rolling term. For tests and diagnostics."""
         if roll is None:
             roll = self.rolling_frames(state)[q] if self.config.rolling else self._no_roll[0]
@@ -531,7 +531,7 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
                      theta: np.ndarray, pos: np.ndarray, rot: np.ndarray,
                      roll: np.ndarray | None = None) -> float:
     """Plain NumPy energy of particle q at configuration (theta, pos, rot), term by term
-    (Eq. 6, 7 compliant, 8 penalty or rolling with the (N, 6) frames `roll`, limits,
+    (Eq. 6, 7 compliant, 8 penalty or rolling with the (N, 17) frames `roll`, limits,
     gravity). The independent reference the vectorised kernel is tested against."""
     m, cfg, obj = motion.model, motion.config, motion.obj
     if roll is None and cfg.rolling:
