@@ -531,8 +531,9 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
                      theta: np.ndarray, pos: np.ndarray, rot: np.ndarray,
                      roll: np.ndarray | None = None) -> float:
     """Plain NumPy energy of particle q at configuration (theta, pos, rot), term by term
-    (Eq. 6, 7 compliant, 8 penalty or rolling with the (N, 17) frames `roll`, limits,
-    gravity). The independent reference the vectorised kernel is tested against."""
+    (Eq. 6, 7 compliant, 8 penalty or rolling with the (N, 17) frames `roll` and the pads'
+    friction, limits, gravity). The independent reference the vectorised kernel is tested
+    against."""
     m, cfg, obj = motion.model, motion.config, motion.obj
     if roll is None and cfg.rolling:
         roll = motion.rolling_frames(state)[q]
