@@ -46,9 +46,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "alike), or one per joint of every finger in the hand's order")
     p.add_argument("--prior-spread-deg", type=float, default=3.0,
                    help="prior std of the joint angles about the nominal grasp [deg]")
-    p.add_argument("--rolling", action="store_true",
-                   help="rolling contacts in the filter's motion model (vlr gap measures "
-                   "them; off by default, docs/RESULTS.md)")
+    p.add_argument("--rolling", action=argparse.BooleanOptionalAction, default=None,
+                   help="rolling contacts in the filter's motion model, or pinned ones with "
+                   "--no-rolling (default: the backend's, vlr.trial.ROLLING_DEFAULT: rolling on "
+                   "sim and hardware, pinned on synthetic; docs/RESULTS.md section 5)")
     p.add_argument("--slide-friction", type=float, default=None, metavar="MU",
                    help="with --rolling: the pads' sliding friction coefficient (default: "
                    "contacts never slide; the sim's pads have 1.0)")
