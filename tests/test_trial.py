@@ -65,6 +65,7 @@ def test_motion_scaled_model_error_runs_a_trial_and_refuses_a_negative_fraction(
     summary = run_trial(TrialSettings(backend="synthetic", particles=300, max_iterations=2,
                                       sigma_motion=0.1))
     assert summary["settings"]["sigma_motion"] == 0.1 and summary["iterations"] == 2
+    assert summary["rolling"] is False    # the synthetic world's default, as it was run
     with pytest.raises(UserError, match="sigma_motion -1"):
         TrialSettings(sigma_motion=-1.0)
     with pytest.raises(UserError, match="sigma_motion 'big'"):

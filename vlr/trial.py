@@ -412,6 +412,7 @@ def identify_trial(settings: TrialSettings, progress: Callable | None = None,
     summary = summarize(result, w.model, args, time.perf_counter() - t0,
                         truths[-1] if truths else None)
     summary["settings"] = settings.to_dict()
+    summary["rolling"] = settings.uses_rolling   # in effect (`rolling` None: the backend's)
     if hasattr(w.world, "regrasps"):  # synthetic: truths drawn again for sitting at a fold
         summary["world_regrasps"] = int(w.world.regrasps)
     return TrialRun(summary, result, w.model, truths)
