@@ -62,7 +62,7 @@ class GapSettings:
         spin_stiffness: the pads' torsional stiffness [N m/rad] (`MotionConfig`).
         slide_friction, spin_friction: the pads' sliding and torsional [m] friction
             coefficients in the friction rung (`MotionConfig`); by default the sim's pads'
-            (`sim.model`): known, like the pad's radius.
+            (`sim.pads`): known, like the pad's radius.
     """
 
     object: str = "apple"

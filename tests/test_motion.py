@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 from scipy.optimize import minimize
 
+from vlr import _energy_kernels as kern
 from vlr.kinematics import Chain, HandModel, normals_from_angles
 from vlr.motion import (
     MotionConfig,
@@ -52,6 +53,14 @@ def grasp(model: HandModel, n: int = 1, tension: float = 5.0, theta=THETA0,
     return mm, st.take(np.zeros(n, dtype=int)), u0
 
 
+def shake(st: ParticleState, seed: int, theta: float, rot: float, pos: float = 0.0) -> None:
+    """Move particle 0 off its equilibrium by normal draws of these sizes [rad, rad, m]."""
+    rng = np.random.default_rng(seed)
+    st.theta += rng.normal(0, theta, st.theta.shape)
+    st.rot[0] = st.rot[0] @ rotvec_to_matrix(rng.normal(0, rot, 3))
+    st.pos[0] += rng.normal(0, pos, 3)
+
+
 def check_derivatives(mm, st, u0, roll=None, e_rel=1e-12, hess_atol=1e-6):
     """The kernel's energy, gradient and (if hess_atol) Hessian of particle 0 against
     central finite differences of the NumPy reference; returns the kernel's energy."""
@@ -92,10 +101,7 @@ def test_rolling_gradient_and_hessian_match_reference(modelo, surface):
     _, st, u0 = grasp(modelo)
     mm = MotionModel(modelo, obj, ROLL)
     roll = mm.rolling_frames(st)[0]
-    rng = np.random.default_rng(3)
-    st.theta += rng.normal(0, 0.02, st.theta.shape)
-    st.rot[0] = st.rot[0] @ rotvec_to_matrix(rng.normal(0, 0.02, 3))
-    st.pos[0] += rng.normal(0, 2e-4, 3)
+    shake(st, 3, 0.02, 0.02, 2e-4)
     check_derivatives(mm, st, u0, roll, e_rel=1e-10, hess_atol=2e-6)
 
 
@@ -202,9 +208,7 @@ def test_rolling_spin_gradient_matches_reference(modelo):
     _, st, u0 = grasp(modelo)
     mm = MotionModel(modelo, obj, replace(ROLL, spin_stiffness=0.05))
     roll = mm.rolling_frames(st)[0]
-    rng = np.random.default_rng(4)
-    st.theta += rng.normal(0, 0.03, st.theta.shape)
-    st.rot[0] = st.rot[0] @ rotvec_to_matrix(rng.normal(0, 0.05, 3))
+    shake(st, 4, 0.03, 0.05)
     e = check_derivatives(mm, st, u0, roll, e_rel=1e-10, hess_atol=None)
     assert e > MotionModel(modelo, obj, ROLL).evaluate(st, 0, u0, roll)[0]
 
@@ -251,11 +255,15 @@ def test_friction_gradient_matches_reference(modelo):
     _, st, u0 = grasp(modelo)
     mm = MotionModel(modelo, obj, FRICTION)
     roll = mm.rolling_frames(st)[0]
-    rng = np.random.default_rng(5)
-    st.theta += rng.normal(0, 0.03, st.theta.shape)
-    st.rot[0] = st.rot[0] @ rotvec_to_matrix(rng.normal(0, 0.05, 3))
-    st.pos[0] += rng.normal(0, 5e-4, 3)
-    roll[:, 16] = (50.0, 0.05, 0.02)  # N: the first contact sticks, the others slip
+    shake(st, 5, 0.03, 0.05, 5e-4)
+    # The stretches carry 1.2-2.0 kN: the first contact's cone (5 kN) holds it, the others'
+    # (0.05 N, 0.02 N) do not.
+    roll[:, kern.RL_FORCE] = (5000.0, 0.05, 0.02)
+    d = st.contacts(modelo)[0] - (st.pos[0] + st.anchors[0] @ st.rot[0].T)
+    n = roll[:, 3:6]
+    load = FRICTION.contact_stiffness * np.linalg.norm(
+        d - np.sum(d * n, axis=-1, keepdims=True) * n, axis=-1) / roll[:, kern.RL_FORCE]
+    assert load[0] < 1.0 and np.all(load[1:] > 1.0)
     e = check_derivatives(mm, st, u0, roll, e_rel=1e-10, hess_atol=None)
     glued = MotionModel(modelo, obj, ROLL)
     assert e < glued.evaluate(st, 0, u0, roll)[0]  # slipping costs less than stretching

@@ -414,38 +414,40 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
 
 
 @njit(cache=True)
+def _normal_force(i, th, seg, nrm, rl, p, R, base_pos, base_rot, pad_xy, pad_r, prm,
+                  sphi, cphi, qy, qz):
+    """Contact i's normal force in the rolling term at the current configuration [N]: k_c
+    times how far finger i's pad sphere sinks into the object's local sphere (rl[i, :3])."""
+    k_n = th.shape[1]
+    _finger_chain(th[i], seg[i], nrm[i], pad_xy[i, 0], pad_xy[i, 1], pad_r[i], sphi, cphi,
+                  qy, qz)
+    s_last, c_last = sphi[k_n - 1], cphi[k_n - 1]
+    pcz = seg[i, k_n - 1]
+    py = qy[k_n - 1] + pad_xy[i, 1] * c_last + pcz * s_last
+    pz = qz[k_n - 1] - pad_xy[i, 1] * s_last + pcz * c_last
+    d0, d1, d2 = _separation(base_pos[i], base_rot[i], pad_xy[i, 0], py, pz, p, R,
+                             rl[i, 0], rl[i, 1], rl[i, 2])
+    g = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - (prm[P_RHO] + pad_r[i])
+    return prm[P_KC] * max(0.0, -g)
+
+
+@njit(cache=True)
 def _update_normal_forces(th, seg, nrm, rl, p, R, base_pos, base_rot, pad_xy, pad_r, prm,
                           sphi, cphi, qy, qz):
-    """Each contact's normal force at the current configuration into rl[:, RL_FORCE]: the
-    friction's limits follow the grasp as it wedges (the rolling term's normal penalty).
-    Returns whether any changed by more than 1 mN + 0.1% (else nothing is written)."""
-    n_f, k_n = th.shape
+    """Each contact's normal force at the current configuration into rl[:, RL_FORCE], so
+    that the friction's limits follow the grasp as it wedges. Writes and returns True only
+    if some force changed by more than 1 mN + 0.1% (else the solve converges undisturbed)."""
+    n_f = th.shape[0]
     changed = False
     for i in range(n_f):
-        _finger_chain(th[i], seg[i], nrm[i], pad_xy[i, 0], pad_xy[i, 1], pad_r[i], sphi, cphi,
-                      qy, qz)
-        s_last, c_last = sphi[k_n - 1], cphi[k_n - 1]
-        pcz = seg[i, k_n - 1]
-        py = qy[k_n - 1] + pad_xy[i, 1] * c_last + pcz * s_last
-        pz = qz[k_n - 1] - pad_xy[i, 1] * s_last + pcz * c_last
-        d0, d1, d2 = _separation(base_pos[i], base_rot[i], pad_xy[i, 0], py, pz, p, R,
-                                 rl[i, 0], rl[i, 1], rl[i, 2])
-        g = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - (prm[P_RHO] + pad_r[i])
-        n = prm[P_KC] * max(0.0, -g)
+        n = _normal_force(i, th, seg, nrm, rl, p, R, base_pos, base_rot, pad_xy, pad_r, prm,
+                          sphi, cphi, qy, qz)
         if abs(n - rl[i, RL_FORCE]) > 1e-3 + 1e-3 * n:
             changed = True
     if changed:
         for i in range(n_f):
-            _finger_chain(th[i], seg[i], nrm[i], pad_xy[i, 0], pad_xy[i, 1], pad_r[i], sphi,
-                          cphi, qy, qz)
-            s_last, c_last = sphi[k_n - 1], cphi[k_n - 1]
-            pcz = seg[i, k_n - 1]
-            py = qy[k_n - 1] + pad_xy[i, 1] * c_last + pcz * s_last
-            pz = qz[k_n - 1] - pad_xy[i, 1] * s_last + pcz * c_last
-            d0, d1, d2 = _separation(base_pos[i], base_rot[i], pad_xy[i, 0], py, pz, p, R,
-                                     rl[i, 0], rl[i, 1], rl[i, 2])
-            g = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - (prm[P_RHO] + pad_r[i])
-            rl[i, RL_FORCE] = prm[P_KC] * max(0.0, -g)
+            rl[i, RL_FORCE] = _normal_force(i, th, seg, nrm, rl, p, R, base_pos, base_rot,
+                                            pad_xy, pad_r, prm, sphi, cphi, qy, qz)
     return changed
 
 

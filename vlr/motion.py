@@ -102,13 +102,14 @@ class MotionConfig:
         slide_friction: with rolling, the pads' sliding friction coefficient mu: a contact
             sticks (the penalty k_c) until its tangential force reaches mu times its normal
             force, then slides; after each solve its stretch is returned onto the cone
-            (`vlr.surface.roll_contacts`). The normal force is each contact's at the start
-            of the solve (its penalty's stretch). inf: contacts never slide (the model
-            before friction). The sim's pads have 1.0 (`sim.pads.SLIDE_FRICTION`).
+            (`vlr.surface.roll_contacts`). The normal force is each contact's penalty
+            stretch, updated during the first half of the Newton iterations so that the
+            grasp can wedge. inf: contacts never slide (the model before friction). The
+            sim's pads have 1.0 (`sim.pads.SLIDE_FRICTION`).
         spin_friction: with rolling, the pads' torsional friction coefficient mu_t [m]: a
             pad sticks about its contact normal until the spin torque reaches mu_t times
             its normal force, then slips (rate-independent Coulomb friction as an
-            incremental dissipation potential, `vlr._energy_kernels._spin`). The sim's pads
+            incremental dissipation potential, `vlr._energy_kernels._evaluate`). The sim's pads
             have 1 mm (`sim.pads.TORSION_FRICTION`); 0 lets them spin freely.
             Friction acts on a command change (`solve(..., u_from=)`) only: a settle has no
             history, so its contacts stick and spin freely as before.
@@ -170,6 +171,11 @@ class MotionConfig:
     @property
     def rolling(self) -> bool:
         return "rolling" in self.terms
+
+    @property
+    def friction(self) -> bool:
+        """Rolling contacts with the pads' friction (sliding or torsional) on."""
+        return self.rolling and (math.isfinite(self.slide_friction) or self.spin_friction > 0)
 
     def with_rolling(self, on: bool = True) -> MotionConfig:
         """This configuration with the rolling term switched on (or off)."""
@@ -338,6 +344,7 @@ class MotionModel:
             np.asarray(self.config.gravity, dtype=float))
         self._flags = self.config.flags()
         self._prm = self._params(self.config)
+        self._prm_settle = self._params(self.config, history=False)
         self._no_roll = np.zeros((1, model.n_fingers, kern.N_RL))
 
     def _params(self, cfg: MotionConfig, history: bool = True) -> np.ndarray:
@@ -348,14 +355,14 @@ class MotionModel:
         prm[kern.P_RHO] = self.obj.surface.kernel_radius
         return prm
 
-    def rolling_frames(self, state: ParticleState,
-                       normals_o: np.ndarray | None = None) -> np.ndarray:
+    def rolling_frames(self, state: ParticleState, normals_o: np.ndarray | None = None,
+                       forces: bool = True) -> np.ndarray:
         """(P, N, 17) what the rolling term holds fixed during a solve: each contact's local
         centre of curvature in O, a - rho m, its normal in the palm frame, R m (m: the
         object's outward normal at the contact, in O), the finger's summed joint angles, the
         object's rotation (for the spin term) and the contact's normal force
-        (`normal_forces`; it sets the friction's limits). `normals_o`: m if already
-        computed (`vlr.surface.surface_normals`)."""
+        (`normal_forces`; it sets the friction's limits; 0 if not `forces`). `normals_o`: m
+        if already computed (`vlr.surface.surface_normals`)."""
         m = (surface_normals(self.model, state.theta, state.normals, state.rot)
              if normals_o is None else normals_o)
         out = np.empty(m.shape[:2] + (kern.N_RL,))
@@ -364,7 +371,8 @@ class MotionModel:
         out[..., kern.RL_NORMAL:kern.RL_NORMAL + 3] = np.einsum("pab,pnb->pna", state.rot, m)
         out[..., kern.RL_PHI] = state.theta.sum(axis=-1)
         out[..., kern.RL_ROT:kern.RL_ROT + 9] = state.rot.reshape(-1, 1, 9)
-        out[..., kern.RL_FORCE] = self.normal_forces(state, out[..., :3])
+        out[..., kern.RL_FORCE] = (self.normal_forces(state, out[..., :3]) if forces
+                                   else 0.0)
         return out
 
     def normal_forces(self, state: ParticleState, centres_o: np.ndarray) -> np.ndarray:
@@ -409,7 +417,8 @@ class MotionModel:
                u_from: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
         """One solve of every valid particle at u (`solve`), rolled in substeps if asked."""
         history = u_from is not None
-        prm = self._params(cfg, history) if (custom or not history) else self._prm
+        prm = (self._params(cfg, history) if custom
+               else self._prm if history else self._prm_settle)
         flags = cfg.flags() if custom else self._flags
         u = np.ascontiguousarray(u, dtype=float).reshape(self.model.n_fingers)
         steps = cfg.rolling_substeps if (cfg.rolling and u_from is not None) else 1
@@ -434,7 +443,9 @@ class MotionModel:
         for j, target in enumerate(targets):
             before = surface_normals(self.model, state.theta, state.normals, state.rot) \
                 if cfg.rolling else None
-            roll = self.rolling_frames(state, before) if cfg.rolling else self._no_roll
+            # Only friction reads the normal forces (a settle has none).
+            roll = (self.rolling_frames(state, before, forces=history and cfg.friction)
+                    if cfg.rolling else self._no_roll)
             kern.solve_batch(state.theta, state.segments, state.normals, state.anchors,
                              roll, state.pos, state.rot, state.stiffness, state.tendon, target,
                              *self._shared, flags, prm, budgets[j], state.valid,
@@ -582,8 +593,8 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
         mu, mu_t = cfg.slide_friction, cfg.spin_friction
         if mu_t > 0:
             eps = cfg.spin_smoothing
-            e += np.sum(mu_t * roll[:, 16] * (np.sqrt(spin**2 + eps**2) - eps))
-        cap = mu * roll[:, 16] if math.isfinite(mu) else np.full(len(roll), math.inf)
+            e += np.sum(mu_t * roll[:, kern.RL_FORCE] * (np.sqrt(spin**2 + eps**2) - eps))
+        cap = mu * roll[:, kern.RL_FORCE] if math.isfinite(mu) else np.full(len(roll), math.inf)
         z = np.sqrt(t2)
         with np.errstate(invalid="ignore"):
             e += np.sum(np.where(kc * z <= cap, 0.5 * kc * t2, cap * z - 0.5 * cap**2 / kc))

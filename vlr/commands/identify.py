@@ -51,10 +51,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "--no-rolling (default: the backend's, vlr.trial.ROLLING_DEFAULT: rolling on "
                    "sim and hardware, pinned on synthetic; docs/RESULTS.md section 5)")
     p.add_argument("--slide-friction", type=float, default=None, metavar="MU",
-                   help="with --rolling: the pads' sliding friction coefficient (default: "
-                   "contacts never slide; the sim's pads have 1.0)")
+                   help="with rolling contacts: the pads' sliding friction coefficient "
+                   "(default: contacts never slide; the sim's pads have 1.0)")
     p.add_argument("--spin-friction", type=float, default=0.0, metavar="MU_T",
-                   help="with --rolling: the pads' torsional friction coefficient [m] "
+                   help="with rolling contacts: the pads' torsional friction coefficient [m] "
                    "(default 0: free spin; the sim's pads have 0.001)")
     p.add_argument("--exploration", choices=("random", "active"), default="random",
                    help="random actions (the paper) or active: the candidate whose predicted "
