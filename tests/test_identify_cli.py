@@ -23,6 +23,13 @@ def test_identify_synthetic_writes_result_history_and_plot(tmp_path):
     final_err = np.degrees(np.abs(hist["mean"][-1, :6] - hist["truth_theta"][-1]))
     np.testing.assert_allclose(final_err, hist["theta_error_deg"][-1], atol=1e-9)
     assert (out / "convergence.png").stat().st_size > 1000
+    # The tolerant coverage counts a truth at most 0.1 degree outside its interval.
+    low, high = hist["low"][-1, :6], hist["high"][-1, :6]
+    miss = np.degrees(np.maximum(np.maximum(low - hist["truth_theta"][-1],
+                                            hist["truth_theta"][-1] - high), 0.0))
+    np.testing.assert_allclose(list(result["miss_deg"].values()), miss, atol=1e-9)
+    assert result["coverage_tolerant"] == np.mean(miss <= 0.1)
+    assert result["coverage_tolerant"] >= result["coverage"]
 
 
 def test_identify_sim_runs_from_rendered_frames(tmp_path):

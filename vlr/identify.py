@@ -95,6 +95,8 @@ class Score:
     theta_covered: np.ndarray
     unknown_error: dict[str, float]
     unknown_covered: dict[str, bool]
+    theta_miss_deg: np.ndarray | None = None
+    theta_true: np.ndarray | None = None
 
 
 @dataclass
@@ -135,6 +137,7 @@ def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
     t = truth.theta.ravel()
     err = np.degrees(np.abs(post.mean[:n_th] - t))
     cov = (post.low[:n_th] <= t) & (t <= post.high[:n_th])
+    miss = np.degrees(np.maximum(np.maximum(post.low[:n_th] - t, t - post.high[:n_th]), 0.0))
     base = len(post.mean) - len(pf.unknowns)
     ue, uc = {}, {}
     for j, u in enumerate(pf.unknowns):
@@ -146,7 +149,7 @@ def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
             true = truth.tendon[max(u.finger, 0)]
         ue[u.spec] = float(post.mean[base + j] - true)
         uc[u.spec] = bool(post.low[base + j] <= true <= post.high[base + j])
-    return Score(err, cov, ue, uc)
+    return Score(err, cov, ue, uc, miss, t.copy())
 
 
 def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],

@@ -8,7 +8,16 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["summarize", "write_outputs"]
+__all__ = ["summarize", "write_outputs", "COVERAGE_TOLERANCE_DEG"]
+
+# A joint angle counts as covered "within tolerance" when the truth lies at most this far
+# outside its 95% interval. Why: a joint resting on its stop sits 0.01-0.08 degrees beyond
+# it in the sim (MuJoCo's soft limit) and a little less far in the model (its stop
+# penalty), so the interval of a joint the filter has pinned to the stop can miss the truth
+# by 0.005 degrees (wine glass, seed 2, the thumb's proximal joint: truth -20.072, interval
+# -20.068 to -20.058). 0.1 degree is 1/20 of the convergence criterion's 2 degrees and half
+# the camera's rotation error. The strict figure stays `coverage`.
+COVERAGE_TOLERANCE_DEG = 0.1
 
 
 def summarize(result, model, args, wall: float, final_truth=None) -> dict:
@@ -53,6 +62,12 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
         out["errors"] = errors
         covered = list(s.theta_covered) + list(s.unknown_covered.values())
         out["coverage"] = float(np.mean(covered))
+        if s.theta_miss_deg is not None:
+            near = list(s.theta_miss_deg <= COVERAGE_TOLERANCE_DEG)
+            out["coverage_tolerant"] = float(np.mean(near + list(s.unknown_covered.values())))
+            names = [f"{f}.{j}" for f in model.names for j in range(k)]
+            out["truth_theta"] = dict(zip(names, s.theta_true.tolist(), strict=True))
+            out["miss_deg"] = dict(zip(names, s.theta_miss_deg.tolist(), strict=True))
     return out
 
 

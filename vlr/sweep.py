@@ -264,6 +264,7 @@ COLUMNS: list[tuple[str, tuple[str, ...]]] = [
     ("distal_deg", ("result", "errors", "distal_deg_mean")),
     ("contact_mm", ("result", "errors", "contact_mm_mean")),
     ("coverage", ("result", "coverage")),
+    ("coverage_tolerant", ("result", "coverage_tolerant")),
     ("s_per_iteration", ("result", "timing", "filter_s_per_iteration_median")),
 ]
 
@@ -309,7 +310,8 @@ def _fmt(values: list[float], digits: int) -> str:
 
 SUMMARY_COLUMNS = [("proximal [deg]", "proximal_deg", 2), ("distal [deg]", "distal_deg", 2),
                    ("contact [mm]", "contact_mm", 2), ("iterations", "iterations", 1),
-                   ("coverage", "coverage", 2), ("s/iteration", "s_per_iteration", 2)]
+                   ("coverage", "coverage", 2), ("coverage (0.1 deg)", "coverage_tolerant", 2),
+                   ("s/iteration", "s_per_iteration", 2)]
 
 
 def summarize_rows(rows: list[dict[str, Any]]) -> list[dict[str, str]]:
