@@ -30,6 +30,10 @@ def test_identify_synthetic_writes_result_history_and_plot(tmp_path):
     np.testing.assert_allclose(list(result["miss_deg"].values()), miss, atol=1e-9)
     assert result["coverage_tolerant"] == np.mean(miss <= 0.1)
     assert result["coverage_tolerant"] >= result["coverage"]
+    # The reported estimates are the set that was scored (the last posterior).
+    est = result["estimates"]
+    np.testing.assert_allclose([e["low"] for e in est.values()], low, atol=1e-12)
+    np.testing.assert_allclose([e["high"] for e in est.values()], high, atol=1e-12)
 
 
 def test_identify_sim_runs_from_rendered_frames(tmp_path):

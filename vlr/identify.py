@@ -231,9 +231,16 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
 def _result(pf: ParticleFilter, iterations: int, converged_at: int | None,
             scores: list[Score], seconds: list[float]) -> IdentifyResult:
     m = pf.model
-    x = pf.pack(pf.state)
-    q = np.quantile(x, [0.025, 0.975], axis=0)
-    mean = x.mean(axis=0)
+    # The estimate is the last posterior (resampled, before the jitter that prepares the
+    # next step), the same set the scores and the convergence test read.
+    last = pf.history[-1] if pf.history else None
+    if last is not None:
+        post = last.posterior or last.prior
+        mean, q = post.mean, np.stack([post.low, post.high])
+    else:
+        x = pf.pack(pf.state)
+        q = np.quantile(x, [0.025, 0.975], axis=0)
+        mean = x.mean(axis=0)
     names = pf.dim_names
     est = {n: Estimate(float(mean[j]), float(q[0, j]), float(q[1, j]))
            for j, n in enumerate(names)}
