@@ -21,7 +21,7 @@ def test_synthetic_known_hand_converges_to_the_truth():
     r = _run(backend="synthetic", particles=6000, seed=0)
     assert r["converged"] and r["converged_at"] <= 20
     assert r["errors"]["proximal_deg_mean"] < 1.0
-    assert r["coverage"] >= 5 / 6
+    assert r["coverage"] >= 5 / 6 and r["coverage_tolerant"] == 1.0
 
 
 def test_synthetic_unknown_thumb_distal_stiffness():
@@ -46,10 +46,11 @@ def test_synthetic_nh1_unknown_link_lengths():
     assert r["errors"]["link_length_mm"]["left"] < 2.0
 
 
-# Measured (3k particles, seed 0, 12 actions, commit 4a721b1): apple proximal 1.83 deg,
-# gelatin box 0.96 deg, both coverage 1.0 (wide intervals: the sim's model gap is issue #5;
-# before the motion model followed large moves, apple 5.98 and gelatin box 0.12).
-@pytest.mark.parametrize("obj, max_proximal_deg", [("apple", 4.0), ("gelatin_box", 2.0)])
+# Measured (3k particles, seed 0, 12 actions; rolling contacts at 0.35 mm / 0.7 deg, the sim's
+# defaults since session 8): apple proximal 0.70 deg, coverage 0.83 (1.0 within 0.1 deg: the
+# thumb's proximal joint sits on its stop), gelatin box 0.55 deg, coverage 1.0. Pinned at
+# 0.5 mm / 1 deg (commit 4a721b1) they were 1.83 and 0.96 deg.
+@pytest.mark.parametrize("obj, max_proximal_deg", [("apple", 2.0), ("gelatin_box", 2.0)])
 def test_sim_from_rendered_frames(obj, max_proximal_deg):
     """Reduced sim regression: rendered frames, 3k particles, 12 actions."""
     r = _run(backend="sim", object=obj, particles=3000, seed=0, max_iterations=12,
@@ -57,4 +58,4 @@ def test_sim_from_rendered_frames(obj, max_proximal_deg):
     err = r["errors"]
     assert np.isfinite(err["proximal_deg_mean"])
     assert err["proximal_deg_mean"] < max_proximal_deg
-    assert r["coverage"] >= 5 / 6
+    assert r["coverage"] >= 5 / 6 and r["coverage_tolerant"] == 1.0

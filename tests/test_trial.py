@@ -66,6 +66,7 @@ def test_motion_scaled_model_error_runs_a_trial_and_refuses_a_negative_fraction(
                                       sigma_motion=0.1))
     assert summary["settings"]["sigma_motion"] == 0.1 and summary["iterations"] == 2
     assert summary["rolling"] is False    # the synthetic world's default, as it was run
+    assert summary["sigma"] == [0.1, 0.4]
     with pytest.raises(UserError, match="sigma_motion -1"):
         TrialSettings(sigma_motion=-1.0)
     with pytest.raises(UserError, match="sigma_motion 'big'"):
@@ -104,3 +105,12 @@ def test_rolling_contacts_by_default_on_the_sim_and_pinned_on_the_synthetic_worl
     assert TrialSettings(backend="synthetic", rolling=True).motion_config().rolling
     with pytest.raises(UserError, match="rolling 'yes'"):
         TrialSettings(rolling="yes")
+
+
+def test_likelihood_scales_follow_the_backend_and_the_contact_model():
+    # The sim's rolling filter takes the narrower ROLLING_SIGMA; pinned and the real hand keep
+    # DEFAULT_SIGMA; explicit scales win.
+    assert TrialSettings(backend="sim").sigma == (0.35, 0.7)
+    assert TrialSettings(backend="sim", rolling=False).sigma == (0.5, 1.0)
+    assert TrialSettings(backend="hardware").sigma == (0.5, 1.0)
+    assert TrialSettings(backend="sim", sigma_pos_mm=0.2).sigma == (0.2, 0.7)

@@ -25,12 +25,20 @@ import numpy as np
 from vlr.errors import UserError
 
 __all__ = ["TrialSettings", "World", "TrialRun", "open_world", "identify_trial", "run_trial",
-           "DEFAULT_SIGMA"]
+           "DEFAULT_SIGMA", "ROLLING_SIGMA"]
 
 # Likelihood scales (sigma_pos [mm], sigma_rot [deg]) per backend (vlr.observation). The
 # synthetic world IS the model, so only its observation noise (0.05 mm, 0.2 deg) counts, with a
 # factor 2 margin; the sim and the real hand add the model-world gap (METHOD.md 8.1).
 DEFAULT_SIGMA = {"synthetic": (0.1, 0.4), "sim": (0.5, 1.0), "hardware": (0.5, 1.0)}
+
+# With rolling contacts the sim's model-world gap is about half the pinned one (per action,
+# docs/RESULTS.md 5), so its likelihood can be narrower. Measured in the sim (10,000
+# particles, 30 actions, seeds 0-2, docs/sweeps/sim-sigma.yaml): over the apple, gelatin box
+# and wine glass the proximal error halves from 0.73 to 0.35 degrees at 0.35 mm / 0.7 deg,
+# with the same coverage (0.85); 0.25 / 0.5 loses coverage (0.80), 0.15 / 0.3 more (0.63).
+# The real hand's gap is not measured, so it keeps the wider scales.
+ROLLING_SIGMA = {"sim": (0.35, 0.7)}
 
 # Synthetic world: an unknown spring whose true rate is not given is drawn from this range of
 # its nominal rate, with the trial's seed (a replaced spring is not the nominal one).
@@ -62,7 +70,8 @@ class TrialSettings:
         unknowns: extra unknowns ("stiffness:thumb.distal", "length:left.proximal", ...).
         true_stiffness: synthetic only: {"finger.joint": k [N m/rad]} true spring rates.
         max_iterations: action budget; min_iterations: no convergence stop before this.
-        sigma_pos_mm, sigma_rot_deg: likelihood scales; None takes `DEFAULT_SIGMA`.
+        sigma_pos_mm, sigma_rot_deg: likelihood scales; None takes `ROLLING_SIGMA` with
+            rolling contacts where the backend has one, else `DEFAULT_SIGMA`.
         sigma_motion: the likelihood's model error as a fraction of each particle's
             predicted motion over the action (`vlr.observation`, kappa); 0 = fixed scales.
         nominal_theta_deg: the user's guess of the grasp's joint angles [deg] (what one sees
@@ -212,6 +221,8 @@ class TrialSettings:
     def sigma(self) -> tuple[float, float]:
         """(sigma_pos [mm], sigma_rot [deg]) in effect."""
         pos, rot = DEFAULT_SIGMA.get(self.backend, DEFAULT_SIGMA["sim"])
+        if self.uses_rolling and self.backend in ROLLING_SIGMA:
+            pos, rot = ROLLING_SIGMA[self.backend]
         return (self.sigma_pos_mm or pos, self.sigma_rot_deg or rot)
 
     @property
@@ -413,6 +424,7 @@ def identify_trial(settings: TrialSettings, progress: Callable | None = None,
                         truths[-1] if truths else None)
     summary["settings"] = settings.to_dict()
     summary["rolling"] = settings.uses_rolling   # in effect (`rolling` None: the backend's)
+    summary["sigma"] = list(settings.sigma)       # in effect, [mm, deg]
     if hasattr(w.world, "regrasps"):  # synthetic: truths drawn again for sitting at a fold
         summary["world_regrasps"] = int(w.world.regrasps)
     return TrialRun(summary, result, w.model, truths)

@@ -36,7 +36,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    metavar="FINGER.JOINT=K", help="synthetic world only: a true spring rate "
                    "[N m/rad]; an unknown stiffness without one is drawn (vlr.trial)")
     p.add_argument("--sigma-pos-mm", type=float, help="likelihood position scale [mm] "
-                   "(default per backend: vlr.trial.DEFAULT_SIGMA)")
+                   "(default per backend and contact model: vlr.trial.DEFAULT_SIGMA, "
+                   "ROLLING_SIGMA)")
     p.add_argument("--sigma-rot-deg", type=float, help="likelihood rotation scale [deg]")
     p.add_argument("--sigma-motion", type=float, default=0.0,
                    help="likelihood model error as a fraction of each particle's predicted "
