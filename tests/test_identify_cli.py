@@ -30,6 +30,9 @@ def test_identify_synthetic_writes_result_history_and_plot(tmp_path):
     np.testing.assert_allclose(list(result["miss_deg"].values()), miss, atol=1e-9)
     assert result["coverage_tolerant"] == np.mean(miss <= 0.1)
     assert result["coverage_tolerant"] >= result["coverage"]
+    np.testing.assert_allclose(result["ci_deg_by_iteration"], hist["ci_deg"], atol=1e-4)
+    np.testing.assert_allclose(result["proximal_deg_by_iteration"][-1],
+                               result["errors"]["proximal_deg_mean"], atol=1e-4)
     # The reported estimates are the set that was scored (the last posterior).
     est = result["estimates"]
     np.testing.assert_allclose([e["low"] for e in est.values()], low, atol=1e-12)

@@ -133,3 +133,13 @@ def test_records_are_strict_json(tmp_path):
     text = (tmp_path / "r.json").read_text()
     assert "NaN" not in text and "Infinity" not in text
     assert json.loads(text) == {"a": None, "b": [None, 1.5], "c": [None, 2.0]}
+
+
+def test_the_row_reads_the_error_after_the_papers_15_actions():
+    from vlr.sweep import PAPER_ITERATIONS, _row
+
+    rec = {"case": "c", "status": "ok", "settings": {},
+           "result": {"proximal_deg_by_iteration": [float(i) for i in range(21)]}}
+    assert _row(rec)["proximal_deg_at_15"] == float(PAPER_ITERATIONS) == 15.0
+    rec["result"]["proximal_deg_by_iteration"] = [1.0] * 10   # stopped before 15 actions
+    assert _row(rec)["proximal_deg_at_15"] is None

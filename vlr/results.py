@@ -33,7 +33,13 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
                  "unknown_estimates": {name: vars(e) for name, e in result.unknowns.items()},
                  "timing": {"filter_s_per_iteration_median": float(np.median(result.seconds)),
                             "wall_s": wall}}
+    # Per iteration (the grasp's update first): the convergence measure, and against the
+    # truth the mean proximal error, so that a table can read either at any iteration.
+    out["ci_deg_by_iteration"] = [round(float(r.ci_deg), 4) for r in result.history]
     if result.scores:
+        out["proximal_deg_by_iteration"] = [
+            round(float(sc.theta_error_deg.reshape(n, k)[:, 0].mean()), 4)
+            for sc in result.scores]
         s = result.scores[-1]
         err = s.theta_error_deg.reshape(n, k)
         errors = {"proximal_deg_mean": float(err[:, 0].mean()),
