@@ -141,5 +141,7 @@ def test_the_row_reads_the_error_after_the_papers_15_actions():
     rec = {"case": "c", "status": "ok", "settings": {},
            "result": {"proximal_deg_by_iteration": [float(i) for i in range(21)]}}
     assert _row(rec)["proximal_deg_at_15"] == float(PAPER_ITERATIONS) == 15.0
-    rec["result"]["proximal_deg_by_iteration"] = [1.0] * 10   # stopped before 15 actions
+    rec["result"]["proximal_deg_by_iteration"] = [2.0] * 10 + [1.0]  # 10 actions, no more
     assert _row(rec)["proximal_deg_at_15"] is None
+    rec["result"]["converged"] = True     # it stopped there on convergence: its final error
+    assert _row(rec)["proximal_deg_at_15"] == 1.0

@@ -281,9 +281,15 @@ def _get(d: Any, path: tuple[str, ...]) -> Any:
 
 def _row(rec: dict[str, Any]) -> dict[str, Any]:
     row = {name: _get(rec, path) for name, path in COLUMNS}
-    # The paper's budget: the error after 15 actions (the grasp's update is entry 0).
+    # The paper's budget: the error after 15 actions (the grasp's update is entry 0), or at
+    # the stop of a trial that converged before.
     by_it = _get(rec, ("result", "proximal_deg_by_iteration")) or []
-    row["proximal_deg_at_15"] = by_it[PAPER_ITERATIONS] if len(by_it) > PAPER_ITERATIONS else None
+    at = None
+    if len(by_it) > PAPER_ITERATIONS:
+        at = by_it[PAPER_ITERATIONS]
+    elif by_it and _get(rec, ("result", "converged")):
+        at = by_it[-1]
+    row["proximal_deg_at_15"] = at
     errors = _get(rec, ("result", "errors")) or {}
     for finger, v in (errors.get("link_length_mm") or {}).items():
         row[f"length_mm.{finger}"] = v
