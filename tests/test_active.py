@@ -63,7 +63,66 @@ def test_choice_is_the_candidate_with_the_widest_prediction():
     assert np.allclose(picked, max(cands, key=lambda d: abs(d[0])))
 
 
-@pytest.mark.parametrize("bad", [dict(candidates=0), dict(subset=1.5)])
+def test_model_error_discounts_a_large_common_motion():
+    """Tendon 0 makes the particles disagree (gain 0.5-1.5); tendon 1 moves every particle by
+    the same large amount, which the particles agree on but the model predicts worst. With a
+    model error the choice weighs the disagreement against the motion."""
+
+    class State:
+        def __init__(self, gain):
+            self.gain = gain
+            self.valid = np.ones(len(gain), dtype=bool)
+            self.pos = np.zeros((len(gain), 3))
+            self.rot = np.broadcast_to(np.eye(3), (len(gain), 3, 3)).copy()
+
+        def take(self, idx):
+            return State(self.gain[idx])
+
+        def copy(self):
+            s = State(self.gain.copy())
+            s.pos, s.rot = self.pos.copy(), self.rot.copy()
+            return s
+
+    class Motion:
+        def solve(self, st, u, u_from=None):
+            d = u - u_from
+            st.pos[:, 0] = st.gain * d[0]
+            st.pos[:, 1] = 20.0 * d[1]
+
+    class Obs:
+        sigma_pos, sigma_rot = 5e-5, 0.02
+
+    class Config:
+        observation = Obs()
+
+    class PF:
+        state = State(np.linspace(0.5, 1.5, 100))
+        motion = Motion()
+        config = Config()
+
+    from vlr.explore import random_action
+
+    explore = ExplorationRange(low=1e-4, high=4e-4, band=4e-4)
+    u = np.zeros(3)
+    rng = np.random.default_rng(4)   # as choose_action draws: the candidates, then the subset
+    cands = [random_action(rng, u, u, explore) for _ in range(8)]
+    gain = PF.state.gain[rng.choice(100, size=50, replace=False)]
+
+    def expected(kappa):
+        def score(d):
+            moved = np.hypot(gain * d[0], 20.0 * d[1]).mean()
+            return np.var(gain * d[0]) / (Obs.sigma_pos**2 + (kappa * moved) ** 2)
+        return max(cands, key=score)
+
+    picks = {k: choose_action(PF(), np.random.default_rng(4), u, u, explore,
+                              ActiveExploration(candidates=8, subset=50, model_error=k))
+             for k in (0.0, 0.5)}
+    assert np.allclose(picks[0.0], expected(0.0))
+    assert np.allclose(picks[0.5], expected(0.5))
+    assert not np.allclose(picks[0.0], picks[0.5])
+
+
+@pytest.mark.parametrize("bad", [dict(candidates=0), dict(subset=1.5), dict(model_error=-0.1)])
 def test_bad_active_settings(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):
         ActiveExploration(**bad)

@@ -27,16 +27,25 @@ class ActiveExploration:
     Attributes:
         candidates: random candidate actions drawn per step (`vlr.explore.random_action`).
         subset: particles predicted per candidate.
+        model_error: kappa, the model's expected error as a fraction of the motion a
+            candidate causes; the spread is then measured against sigma^2 + (kappa x the
+            subset's mean predicted POM motion)^2, so that a large action, whose outcome the
+            model predicts worst, is not chosen for its size alone. 0 = the likelihood's
+            fixed scales (the choice measured on the synthetic world).
     """
 
     candidates: int = 8
     subset: int = 256
+    model_error: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("candidates", "subset"):
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise ValueError(f"active exploration {name} {v!r} must be an integer >= 1")
+        if not (isinstance(self.model_error, int | float) and 0 <= self.model_error < 10):
+            raise ValueError(f"active exploration model_error {self.model_error!r} must be a "
+                             "number in [0, 10)")
 
 
 def prediction_spread(pos: np.ndarray, rot: np.ndarray, sigma_pos: float,
@@ -63,11 +72,18 @@ def choose_action(pf, rng: np.random.Generator, commands: np.ndarray, center: np
     base = pf.state.take(idx)
     obs = pf.config.observation
     best, best_score = cands[0], -np.inf
+    k = settings.model_error
     for delta in cands:
         st = base.copy()
         pf.motion.solve(st, commands + delta, u_from=commands)
         ok = st.valid
-        score = prediction_spread(st.pos[ok], st.rot[ok], obs.sigma_pos, obs.sigma_rot)
+        sp, sr = obs.sigma_pos, obs.sigma_rot
+        if k > 0 and ok.any():
+            moved = np.linalg.norm(st.pos[ok] - base.pos[ok], axis=-1).mean()
+            turned = Rotation.from_matrix(np.einsum("pba,pbc->pac", base.rot[ok],
+                                                    st.rot[ok])).magnitude().mean()
+            sp, sr = np.hypot(sp, k * moved), np.hypot(sr, k * turned)
+        score = prediction_spread(st.pos[ok], st.rot[ok], sp, sr)
         if score > best_score:
             best, best_score = delta, score
     return best

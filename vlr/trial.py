@@ -92,6 +92,8 @@ class TrialSettings:
             pads' material, known like their radius: the sim's are 1.0 and 0.001
             (`sim.pads`).
         exploration: "random" actions (the paper) or "active" (vlr.active).
+        active_model_error: with active exploration, the model's expected error as a
+            fraction of each candidate's predicted motion (`ActiveExploration.model_error`).
         config: hardware only: the hardware YAML file.
     """
 
@@ -114,6 +116,7 @@ class TrialSettings:
     slide_friction: float | None = None
     spin_friction: float = 0.0
     exploration: str = "random"
+    active_model_error: float = 0.0
     config: str | None = None
 
     def __post_init__(self) -> None:
@@ -177,7 +180,7 @@ class TrialSettings:
             if not is_int(getattr(self, name)):
                 raise bad(name, "an integer")
         for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg", "sigma_motion",
-                     "slide_friction", "spin_friction"):
+                     "slide_friction", "spin_friction", "active_model_error"):
             v = getattr(self, name)
             if not (is_real(v) or (v is None and name in ("sigma_pos_mm", "sigma_rot_deg",
                                                           "slide_friction"))):
@@ -186,6 +189,8 @@ class TrialSettings:
             raise bad("rolling", "true or false (or none: the backend's default)")
         if self.exploration not in ("random", "active"):
             raise UserError(f"exploration {self.exploration!r}: expected random or active")
+        if not 0 <= self.active_model_error < 10:
+            raise UserError(f"active_model_error {self.active_model_error} must be in [0, 10)")
         if isinstance(self.unknowns, str):  # one unknown, not a list of its letters
             object.__setattr__(self, "unknowns", (self.unknowns,))
         if (not isinstance(self.unknowns, list | tuple)
@@ -361,6 +366,7 @@ def check_unknowns(settings: TrialSettings, model) -> None:
 
 def identify_config(settings: TrialSettings, model):
     """The `IdentifyConfig` of a trial; bad unknown specs become a UserError."""
+    from vlr.active import ActiveExploration
     from vlr.filter import FilterConfig
     from vlr.identify import IdentifyConfig
     from vlr.observation import ObservationModel
@@ -377,7 +383,8 @@ def identify_config(settings: TrialSettings, model):
                                                      motion_fraction=settings.sigma_motion))
     return IdentifyConfig(max_iterations=settings.max_iterations,
                           min_iterations=settings.min_iterations, filter=fcfg,
-                          exploration=settings.exploration)
+                          exploration=settings.exploration,
+                          active=ActiveExploration(model_error=float(settings.active_model_error)))
 
 
 @dataclass
