@@ -60,6 +60,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--exploration", choices=("random", "active"), default="random",
                    help="random actions (the paper) or active: the candidate whose predicted "
                    "POM poses disagree most across the particles")
+    p.add_argument("--active-model-error", type=float, default=0.0, metavar="KAPPA",
+                   help="with --exploration active: weigh the disagreement against the "
+                   "model's expected error, KAPPA x each candidate's predicted motion")
     p.add_argument("--config", help="hardware backend: the hardware YAML file")
     p.add_argument("--out", default="runs/identify", help="output folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -129,7 +132,8 @@ def run(args: argparse.Namespace) -> int:
         sigma_rot_deg=args.sigma_rot_deg, sigma_motion=args.sigma_motion, config=args.config,
         nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg,
         rolling=args.rolling, slide_friction=args.slide_friction,
-        spin_friction=args.spin_friction, exploration=args.exploration)
+        spin_friction=args.spin_friction, exploration=args.exploration,
+        active_model_error=args.active_model_error)
     bar = None
 
     def progress(rec) -> None:
