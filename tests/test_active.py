@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from vlr.active import ActiveExploration, choose_action, prediction_spread
-from vlr.explore import ExplorationRange
+from vlr.explore import ExplorationRange, random_action
 from vlr.motion import rotvec_to_matrix
 from vlr.trial import TrialSettings, run_trial
 
@@ -21,100 +21,80 @@ def test_spread_grows_with_disagreement_in_likelihood_units():
     assert prediction_spread(pos[:1], rot[:1], 5e-4, 0.02) == 0.0
 
 
-def test_choice_is_the_candidate_with_the_widest_prediction():
-    """With a fake filter whose motion model moves the POM by the action's first component
-    times each particle's gain, the largest |delta_0| spreads the most."""
+class _FakeState:
+    """Particles whose POM starts at the origin; `gain` sets how each reacts to tendon 0."""
 
-    class State:
-        def __init__(self, gain):
-            self.gain = gain
-            self.valid = np.ones(len(gain), dtype=bool)
-            self.pos = np.zeros((len(gain), 3))
-            self.rot = np.broadcast_to(np.eye(3), (len(gain), 3, 3)).copy()
+    def __init__(self, gain):
+        self.gain = gain
+        self.valid = np.ones(len(gain), dtype=bool)
+        self.pos = np.zeros((len(gain), 3))
+        self.rot = np.broadcast_to(np.eye(3), (len(gain), 3, 3)).copy()
 
-        def take(self, idx):
-            return State(self.gain[idx])
+    def take(self, idx):
+        return _FakeState(self.gain[idx])
 
-        def copy(self):
-            return State(self.gain.copy())
-
-    class Motion:
-        def solve(self, st, u, u_from=None):
-            st.pos[:, 0] = st.gain * (u - u_from)[0]
-
-    class Obs:
-        sigma_pos, sigma_rot = 5e-4, 0.02
-
-    class Config:
-        observation = Obs()
-
-    class PF:
-        state = State(np.linspace(0.5, 1.5, 100))
-        motion = Motion()
-        config = Config()
-
-    explore = ExplorationRange(low=1e-4, high=4e-4, band=4e-4)
-    u = np.zeros(3)
-    picked = choose_action(PF(), np.random.default_rng(1), u, u, explore,
-                           ActiveExploration(candidates=6, subset=50))
-    cands_rng = np.random.default_rng(1)
-    from vlr.explore import random_action
-    cands = [random_action(cands_rng, u, u, explore) for _ in range(6)]
-    assert np.allclose(picked, max(cands, key=lambda d: abs(d[0])))
+    def copy(self):
+        s = _FakeState(self.gain.copy())
+        s.pos, s.rot = self.pos.copy(), self.rot.copy()
+        return s
 
 
-def test_model_error_discounts_a_large_common_motion():
-    """Tendon 0 makes the particles disagree (gain 0.5-1.5); tendon 1 moves every particle by
-    the same large amount, which the particles agree on but the model predicts worst. With a
-    model error the choice weighs the disagreement against the motion."""
-
-    class State:
-        def __init__(self, gain):
-            self.gain = gain
-            self.valid = np.ones(len(gain), dtype=bool)
-            self.pos = np.zeros((len(gain), 3))
-            self.rot = np.broadcast_to(np.eye(3), (len(gain), 3, 3)).copy()
-
-        def take(self, idx):
-            return State(self.gain[idx])
-
-        def copy(self):
-            s = State(self.gain.copy())
-            s.pos, s.rot = self.pos.copy(), self.rot.copy()
-            return s
+def _fake_filter(common_gain: float, sigma_pos: float):
+    """A filter whose motion model moves particle p's POM along x by gain_p x delta_0 (they
+    disagree) and along y by common_gain x delta_1 (they agree), gains 0.5-1.5."""
 
     class Motion:
         def solve(self, st, u, u_from=None):
             d = u - u_from
             st.pos[:, 0] = st.gain * d[0]
-            st.pos[:, 1] = 20.0 * d[1]
+            st.pos[:, 1] = common_gain * d[1]
 
     class Obs:
-        sigma_pos, sigma_rot = 5e-5, 0.02
+        pass
+
+    Obs.sigma_pos, Obs.sigma_rot = sigma_pos, 0.02
 
     class Config:
         observation = Obs()
 
     class PF:
-        state = State(np.linspace(0.5, 1.5, 100))
+        state = _FakeState(np.linspace(0.5, 1.5, 100))
         motion = Motion()
         config = Config()
 
-    from vlr.explore import random_action
+    return PF()
 
-    explore = ExplorationRange(low=1e-4, high=4e-4, band=4e-4)
+
+EXPLORE = ExplorationRange(low=1e-4, high=4e-4, band=4e-4)
+
+
+def test_choice_is_the_candidate_with_the_widest_prediction():
+    """Only tendon 0 makes the particles disagree: the largest |delta_0| spreads the most."""
+    u = np.zeros(3)
+    picked = choose_action(_fake_filter(0.0, 5e-4), np.random.default_rng(1), u, u, EXPLORE,
+                           ActiveExploration(candidates=6, subset=50))
+    cands_rng = np.random.default_rng(1)
+    cands = [random_action(cands_rng, u, u, EXPLORE) for _ in range(6)]
+    assert np.allclose(picked, max(cands, key=lambda d: abs(d[0])))
+
+
+def test_model_error_discounts_a_large_common_motion():
+    """Tendon 1 moves every particle by the same large amount, which the particles agree on
+    but the model predicts worst. With a model error the choice weighs the disagreement
+    against the motion."""
+    pf = _fake_filter(20.0, 5e-5)
     u = np.zeros(3)
     rng = np.random.default_rng(4)   # as choose_action draws: the candidates, then the subset
-    cands = [random_action(rng, u, u, explore) for _ in range(8)]
-    gain = PF.state.gain[rng.choice(100, size=50, replace=False)]
+    cands = [random_action(rng, u, u, EXPLORE) for _ in range(8)]
+    gain = pf.state.gain[rng.choice(100, size=50, replace=False)]
 
     def expected(kappa):
         def score(d):
             moved = np.hypot(gain * d[0], 20.0 * d[1]).mean()
-            return np.var(gain * d[0]) / (Obs.sigma_pos**2 + (kappa * moved) ** 2)
+            return np.var(gain * d[0]) / (5e-5**2 + (kappa * moved) ** 2)
         return max(cands, key=score)
 
-    picks = {k: choose_action(PF(), np.random.default_rng(4), u, u, explore,
+    picks = {k: choose_action(pf, np.random.default_rng(4), u, u, EXPLORE,
                               ActiveExploration(candidates=8, subset=50, model_error=k))
              for k in (0.0, 0.5)}
     assert np.allclose(picks[0.0], expected(0.0))

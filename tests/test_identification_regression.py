@@ -75,12 +75,15 @@ def test_sim_unknown_thumb_distal_stiffness():
 
 
 def test_sim_nh1_unknown_link_lengths():
-    # Measured (3k, seed 0, 12 actions, rolling at 0.35 mm / 0.7 deg): NF1's links (true
-    # proximal 40 mm against the Model O's 62) to 6.5 mm on average over the proximal link
-    # and the pad offset, proximal angles 1.25 deg, coverage 0.88. The prior's mean is about
-    # 16 mm off the proximal link.
+    # Measured (3k, seed 0, 12 actions, rolling at 0.35 mm / 0.7 deg): NF1's proximal link
+    # (true 40 mm, the Model O's 62) estimated 37.5 mm, interval 31.8-43.6, error 2.5 mm,
+    # where the prior's mean (uniform, 31-81 mm) is 15.8 mm off; proximal angles 1.25 deg.
+    # (The pad offset, true 27 mm against 32, ends 10.5 mm off, worse than the prior's 1.8:
+    # docs/RESULTS.md 2, so it is not asserted.)
     r = _run(backend="sim", object="apple", true_hand="nh1", particles=3000, seed=0,
              max_iterations=12, nominal_theta_deg=(-10.0, 15.0), prior_spread_deg=10.0,
              unknowns=("length:left.proximal", "length:left.distal"))
-    assert r["errors"]["link_length_mm"]["left"] < 10.0
+    est = r["unknown_estimates"]["length:left.proximal"]
+    assert r["errors"]["link_length_mm_by_joint"]["left.proximal"] < 6.0
+    assert est["low"] <= 0.040 <= est["high"]
     assert r["errors"]["proximal_deg_mean"] < 3.0

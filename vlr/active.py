@@ -43,7 +43,8 @@ class ActiveExploration:
             v = getattr(self, name)
             if not isinstance(v, int) or isinstance(v, bool) or v < 1:
                 raise ValueError(f"active exploration {name} {v!r} must be an integer >= 1")
-        if not (isinstance(self.model_error, int | float) and 0 <= self.model_error < 10):
+        if (isinstance(self.model_error, bool) or not isinstance(self.model_error, int | float)
+                or not 0 <= self.model_error < 10):
             raise ValueError(f"active exploration model_error {self.model_error!r} must be a "
                              "number in [0, 10)")
 
