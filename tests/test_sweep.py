@@ -145,3 +145,18 @@ def test_the_row_reads_the_error_after_the_papers_15_actions():
     assert _row(rec)["proximal_deg_at_15"] is None
     rec["result"]["converged"] = True     # it stopped there on convergence: its final error
     assert _row(rec)["proximal_deg_at_15"] == 1.0
+
+
+def test_the_row_compares_the_proximal_links_alone_with_the_paper():
+    from vlr.sweep import _row, summarize_rows
+
+    errors = {"link_length_mm": {"left": 4.0, "right": 3.0},
+              "link_length_mm_by_joint": {"left.proximal": 1.0, "left.distal": 7.0,
+                                          "right.proximal": 5.0, "right.distal": 1.0}}
+    rec = {"case": "c", "status": "ok", "settings": {}, "result": {"errors": errors}}
+    row = _row(rec)
+    assert row["proximal_link_mm"] == 3.0       # (1 + 5) / 2, the distal offsets left out
+    assert row["length_mm.left"] == 4.0         # the mean over both is still there
+    assert summarize_rows([row])[0]["proximal link error [mm]"] == "3.00"
+    rec["result"]["errors"] = {"link_length_mm_by_joint": {"left.distal": 2.0}}
+    assert "proximal_link_mm" not in _row(rec)

@@ -293,6 +293,13 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
     errors = _get(rec, ("result", "errors")) or {}
     for finger, v in (errors.get("link_length_mm") or {}).items():
         row[f"length_mm.{finger}"] = v
+    # The paper's novel-finger unknown is the proximal link alone (METHOD.md 3, 6); the pad's
+    # offset along the distal link is ours (our novel fingers change it too), so the paper's
+    # figure is compared with the proximal links' mean, shown beside the mean over both.
+    by_joint = errors.get("link_length_mm_by_joint") or {}
+    proximal = [v for joint, v in by_joint.items() if joint.endswith(".proximal")]
+    if proximal:
+        row["proximal_link_mm"] = float(np.mean(proximal))
     for joint, v in (errors.get("stiffness") or {}).items():
         row[f"stiffness.{joint}"] = v
     if rec.get("status") != "ok":
@@ -324,7 +331,8 @@ SUMMARY_COLUMNS = [("proximal [deg]", "proximal_deg", 2),
                    ("distal [deg]", "distal_deg", 2),
                    ("contact [mm]", "contact_mm", 2), ("iterations", "iterations", 1),
                    ("coverage", "coverage", 2), ("coverage (0.1 deg)", "coverage_tolerant", 2),
-                   ("s/iteration", "s_per_iteration", 2)]
+                   ("s/iteration", "s_per_iteration", 2),
+                   ("proximal link error [mm]", "proximal_link_mm", 2)]
 
 
 def summarize_rows(rows: list[dict[str, Any]]) -> list[dict[str, str]]:
