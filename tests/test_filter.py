@@ -72,11 +72,11 @@ def test_parse_unknown(modelo):
         parse_unknown("mass:thumb", modelo)
 
 
-def _run(modelo, seed, steps=2, unknowns=()):
+def _run(modelo, seed, steps=2, unknowns=(), **config):
     world = SyntheticWorld(modelo, OBJ, SyntheticConfig(seed=1))
     u = world.grasp()
     pf = ParticleFilter(modelo, OBJ, FilterConfig(n_particles=300, seed=seed,
-                                                  unknowns=unknowns))
+                                                  unknowns=unknowns, **config))
     pf.initialize(world.observe(), u, world.nominal.theta, world.nominal.contact)
     rng = np.random.default_rng(5)
     for k in range(steps):
@@ -91,6 +91,26 @@ def test_same_seed_same_numbers(modelo):
     np.testing.assert_array_equal(a.pack(a.state), b.pack(b.state))
     c = _run(modelo, 8, unknowns=("stiffness:thumb.distal",))
     assert not np.array_equal(a.pack(a.state), c.pack(c.state))
+
+
+def test_annealing_applies_the_whole_likelihood_in_stages(modelo):
+    """A grasp observation sharp against the prior is tempered (beta < 1); with stages, the
+    rest of it is applied after resample-move steps, up to beta = 1."""
+    one = _run(modelo, 3, steps=0)
+    assert one.history[0].beta < 0.5 and one.history[0].stages == 1
+    many = _run(modelo, 3, steps=2, anneal_stages=8)
+    first = many.history[0]
+    assert first.stages > 1 and first.beta == pytest.approx(1.0)
+    assert first.ess >= 0.1 * 300 * 0.999        # every stage kept the ESS floor
+    assert np.all(np.isfinite(many.pack(many.state)))
+    again = _run(modelo, 3, steps=2, anneal_stages=8)
+    np.testing.assert_array_equal(many.pack(many.state), again.pack(again.state))
+
+
+@pytest.mark.parametrize("bad", [0, 1.5, True, "3"])
+def test_bad_anneal_stages_are_named(bad):
+    with pytest.raises(ValueError, match="anneal_stages"):
+        FilterConfig(anneal_stages=bad)
 
 
 def test_prediction_only_step_and_records(modelo):

@@ -143,9 +143,10 @@ def effective_sample_size(weights: np.ndarray) -> float:
     return float(1.0 / np.sum((w / s) ** 2)) if s > 0 else 0.0
 
 
-def temper(log_lik: np.ndarray, ess_fraction: float,
-           iterations: int = 30) -> tuple[np.ndarray, float]:
-    """Tempered weights w ~ L^beta with the largest beta in (0, 1] whose ESS >= ess_fraction P.
+def temper(log_lik: np.ndarray, ess_fraction: float, iterations: int = 30,
+           max_beta: float = 1.0) -> tuple[np.ndarray, float]:
+    """Tempered weights w ~ L^beta with the largest beta in (0, max_beta] whose
+    ESS >= ess_fraction P.
 
     Early in a run the likelihood is sharp against a wide prior and plain weights collapse
     onto a few dozen particles (METHOD.md 8.2); tempering keeps the particle set alive while
@@ -165,10 +166,10 @@ def temper(log_lik: np.ndarray, ess_fraction: float,
         w = np.where(finite, np.exp(beta * np.where(finite, ll, 0.0)), 0.0)
         return w / w.sum()
 
-    w = weights(1.0)
+    w = weights(max_beta)
     if effective_sample_size(w) >= target or ess_fraction <= 0:
-        return w, 1.0
-    lo, hi = 0.0, 1.0
+        return w, max_beta
+    lo, hi = 0.0, max_beta
     for _ in range(iterations):
         mid = 0.5 * (lo + hi)
         if effective_sample_size(weights(mid)) >= target:
@@ -223,6 +224,15 @@ class FilterConfig:
         jitter_keep_parent: the first copy of each resampled particle is kept as it was and
             only its duplicates are jittered (`ParticleFilter._jitter`).
         observation: likelihood scales.
+        anneal_stages: the most weighting stages per observation. When tempering holds the
+            exponent beta below 1 (the likelihood is sharp against the particle spread: the
+            grasp's observation, a surprising action), the rest of the likelihood is not
+            thrown away: the particles are resampled, their states BEFORE the motion step
+            jittered (Liu-West) and moved again (the action re-solved, or the prior
+            re-settled), and weighted by the likelihood to the remaining exponent, until the
+            exponents sum to 1 or the stages are spent (annealed importance sampling with
+            resample-move steps; Deutscher et al. 2000, Chopin 2002). Each stage costs one
+            motion solve of the moved particles. 1: the remainder is dropped.
     """
 
     n_particles: int = 60_000
@@ -240,6 +250,12 @@ class FilterConfig:
     project_jitter: bool = True
     jitter_keep_parent: bool = True
     observation: ObservationModel = field(default_factory=ObservationModel)
+    anneal_stages: int = 1
+
+    def __post_init__(self) -> None:
+        if isinstance(self.anneal_stages, bool) or not (
+                isinstance(self.anneal_stages, int) and self.anneal_stages >= 1):
+            raise ValueError(f"anneal_stages {self.anneal_stages!r} must be an integer >= 1")
 
 
 @dataclass(frozen=True)
@@ -281,6 +297,7 @@ class IterationRecord:
     beta: float
     n_invalid: int
     ci_deg: float
+    stages: int = 1
 
 
 # --------------------------------------------------------------------------- the filter
@@ -308,6 +325,11 @@ class ParticleFilter:
         self.recoveries = 0  # times every particle failed and the prior was resampled
         self.prior_redraws = 0  # prior draws of which no particle settled (`initialize`)
         self._before: tuple[np.ndarray, np.ndarray] | None = None  # POM poses before an action
+        # The particles before the last motion step and the command they were at (None: the
+        # prior's draws before their settle), for the resample-move stages of `anneal_stages`.
+        self._pre: tuple[ParticleState, np.ndarray | None] | None = None
+        self._init_cfg = replace(self.config.motion, jump_theta=self.config.init_jump_theta,
+                                 jump_pos=0.05, max_iter=max(self.config.motion.max_iter, 100))
         # Seconds per phase of the last iteration (motion, observation, weights, resampling,
         # jitter, summary), for `vlr bench`.
         self.timings: dict[str, float] = {}
@@ -385,10 +407,9 @@ class ParticleFilter:
         state.anchor_to_pose(m)
         self.state = state
         self.command = np.asarray(command, dtype=float).copy()
-        init_cfg = replace(cfg.motion, jump_theta=cfg.init_jump_theta, jump_pos=0.05,
-                           max_iter=max(cfg.motion.max_iter, 100))
+        self._pre = (state.copy(), None) if cfg.anneal_stages > 1 else None
         t0 = time.perf_counter()
-        status, _ = self.motion.solve(state, self.command, init_cfg)
+        status, _ = self.motion.solve(state, self.command, self._init_cfg)
         self.timings = {"motion": time.perf_counter() - t0}
         self.init_status = np.bincount(status, minlength=5)
 
@@ -406,6 +427,8 @@ class ParticleFilter:
         # the likelihood's model error when `observation.motion_fraction` > 0.
         self._before = ((self.state.pos.copy(), self.state.rot.copy())
                         if self.obs_model.motion_fraction > 0 else None)
+        self._pre = ((self.state.copy(), previous) if self.config.anneal_stages > 1
+                     else None)
         _, iters = self.motion.solve(self.state, self.command, u_from=previous)
         # Median Newton iterations of the action solve and of the post-jitter settle
         # (`vlr bench` reports them: they are what a filter iteration costs).
@@ -442,16 +465,24 @@ class ParticleFilter:
             return rec
         # Eq. 5 likelihood, tempered (METHOD.md 8.2).
         t = time.perf_counter()
-        motion = None
-        if self._before is not None:
-            pos0, rot0 = self._before
-            motion = (np.linalg.norm(state.pos - pos0, axis=-1), rotation_angle(rot0, state.rot))
-        log_lik = self.obs_model.log_likelihood(state, observation, motion)
+        log_lik = self._log_likelihood(state, observation)
         tm["observation"] = time.perf_counter() - t
         t = time.perf_counter()
         w, beta = temper(log_lik, cfg.ess_fraction)
-        ess = effective_sample_size(w)
         tm["weights"] = time.perf_counter() - t
+        # The rest of a tempered likelihood in resample-move stages (`anneal_stages`).
+        stages = 1
+        t = time.perf_counter()
+        while beta < 1.0 - 1e-9 and stages < cfg.anneal_stages and self._pre is not None:
+            self.state = state = self._move(systematic_resample(w, self.rng))
+            w, b = temper(self._log_likelihood(state, observation), cfg.ess_fraction,
+                          max_beta=1.0 - beta)
+            beta, stages = beta + b, stages + 1
+        self._pre = None
+        if stages > 1:
+            x = self.pack(state)
+        tm["anneal"] = time.perf_counter() - t
+        ess = effective_sample_size(w)
         # Resample (systematic), then jitter.
         t = time.perf_counter()
         idx = systematic_resample(w, self.rng)
@@ -466,18 +497,65 @@ class ParticleFilter:
         self._jitter(x, idx)
         tm["jitter"] = time.perf_counter() - t
         rec = IterationRecord(self.iteration, self.command, prior, posterior, ess, beta,
-                              n_invalid, ci)
+                              n_invalid, ci, stages)
         self.history.append(rec)
         return rec
 
-    def _jitter(self, x: np.ndarray, parents: np.ndarray | None = None) -> None:
-        """Liu-West kernel over the sampled dimensions, then re-anchor (METHOD.md 8.2).
+    def _log_likelihood(self, state: ParticleState, observation: PoseObservation) -> np.ndarray:
+        """Eq. 5 per particle; with `motion_fraction`, its scales grow with each particle's
+        predicted POM motion over the action (from `self._before`)."""
+        motion = None
+        if self._before is not None:
+            pos0, rot0 = self._before
+            motion = (np.linalg.norm(state.pos - pos0, axis=-1), rotation_angle(rot0, state.rot))
+        return self.obs_model.log_likelihood(state, observation, motion)
+
+    def _move(self, idx: np.ndarray) -> ParticleState:
+        """One resample-move stage (`FilterConfig.anneal_stages`): the particles `idx` (a
+        systematic resample) as they were before the motion step, jittered by the Liu-West
+        kernel and moved again. Before an action: jittered and settled at the old command
+        (`_jitter`), then the action solved again. At the grasp: the prior's draws jittered,
+        anchored at the observed pose and settled again. The first copy of each parent is not
+        jittered and keeps its motion. Returns the particles after the motion step."""
+        pre, u_prev = self._pre
+        pre = pre.take(idx)
+        post = self.state.take(idx)
+        x = self.pack(pre)
+        if u_prev is None:
+            x_new, moved = self._kernel(x, idx)
+            rows = np.arange(len(idx)) if moved is None else np.flatnonzero(moved)
+            sub = pre.take(rows)
+            self.unpack(x_new[rows], sub)
+            sub.anchor_to_pose(self.model)
+            pre.put(rows, sub)
+            sub = sub.copy()
+            self.motion.solve(sub, self.command, self._init_cfg)
+        else:
+            state, command = self.state, self.command
+            self.state, self.command = pre, u_prev
+            try:
+                moved = self._jitter(x, idx)
+            finally:
+                self.state, self.command = state, command
+            rows = np.arange(len(idx)) if moved is None else np.flatnonzero(moved)
+            sub = pre.take(rows)
+            self.motion.solve(sub, self.command, u_from=u_prev)
+        post.put(rows, sub)
+        self._pre = (pre, u_prev)
+        if self._before is not None:
+            self._before = (pre.pos.copy(), pre.rot.copy())
+        return post
+
+    def _kernel(self, x: np.ndarray,
+                parents: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:
+        """Liu-West draw over the sampled dimensions (METHOD.md 8.2).
 
         x' = a x + (1 - a) mean + h L eps, with L L^T the particle covariance and
-        a = sqrt(1 - h^2): the kernel adds h^2 of the variance and the shrink removes it."""
-        cfg, state = self.config, self.state
+        a = sqrt(1 - h^2): the kernel adds h^2 of the variance and the shrink removes it.
+        Returns x' and the rows that moved (None: all; with `jitter_keep_parent` the first
+        copy of each resampled parent stays as it was)."""
+        cfg = self.config
         h = cfg.jitter_h
-        residuals = state.contact_residuals(self.model)
         mean = x.mean(axis=0)
         cov = np.cov(x, rowvar=False)
         d = cov.shape[0]
@@ -501,12 +579,21 @@ class ParticleFilter:
             col = x_new[:, base + j]
             col = np.where(col < lo, 2 * lo - col, col)
             x_new[:, base + j] = np.clip(np.where(col > hi, 2 * hi - col, col), lo, hi)
+        return x_new, moved
+
+    def _jitter(self, x: np.ndarray, parents: np.ndarray | None = None) -> np.ndarray | None:
+        """Liu-West kernel (`_kernel`) on `self.state` at `self.command`, then re-anchor and
+        settle (`_project`). Returns the rows that moved (None: all)."""
+        state = self.state
+        residuals = state.contact_residuals(self.model)
+        x_new, moved = self._kernel(x, parents)
         self.unpack(x_new, state)
         # The POM keeps its pose; the anchors follow the jittered contacts, each contact
         # keeping its penalty stretch (the grasp force).
         state.anchor_to_pose(self.model, residuals)
-        if cfg.project_jitter:
+        if self.config.project_jitter:
             self._project(state, moved)
+        return moved
 
     def _project(self, state: ParticleState, moved: np.ndarray | None = None) -> None:
         """Settle jittered particles to equilibrium at the current command, then re-anchor.

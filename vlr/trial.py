@@ -94,6 +94,9 @@ class TrialSettings:
         exploration: "random" actions (the paper) or "active" (vlr.active).
         active_model_error: with active exploration, the model's expected error as a
             fraction of each candidate's predicted motion (`ActiveExploration.model_error`).
+        anneal_stages: the filter's most weighting stages per observation
+            (`vlr.filter.FilterConfig.anneal_stages`); 1: a tempered likelihood's rest is
+            dropped.
         config: hardware only: the hardware YAML file.
     """
 
@@ -117,6 +120,7 @@ class TrialSettings:
     spin_friction: float = 0.0
     exploration: str = "random"
     active_model_error: float = 0.0
+    anneal_stages: int = 1
     config: str | None = None
 
     def __post_init__(self) -> None:
@@ -127,6 +131,8 @@ class TrialSettings:
             raise UserError(f"particles {self.particles} must be >= 10")
         if self.max_iterations < 1:
             raise UserError(f"max_iterations {self.max_iterations} must be >= 1")
+        if not 1 <= self.anneal_stages <= 50:
+            raise UserError(f"anneal_stages {self.anneal_stages} must be in [1, 50]")
         if not 0 <= self.min_iterations <= self.max_iterations:
             raise UserError(f"min_iterations {self.min_iterations} must be in "
                             f"[0, max_iterations={self.max_iterations}]")
@@ -176,7 +182,7 @@ class TrialSettings:
         for name in ("true_hand", "config"):
             if getattr(self, name) is not None and not isinstance(getattr(self, name), str):
                 raise bad(name, "a name or path")
-        for name in ("particles", "seed", "max_iterations", "min_iterations"):
+        for name in ("particles", "seed", "max_iterations", "min_iterations", "anneal_stages"):
             if not is_int(getattr(self, name)):
                 raise bad(name, "an integer")
         for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg", "sigma_motion",
@@ -378,6 +384,7 @@ def identify_config(settings: TrialSettings, model):
                         motion=settings.motion_config(),
                         unknowns=settings.unknowns,
                         theta_spread=float(np.radians(settings.prior_spread_deg)),
+                        anneal_stages=settings.anneal_stages,
                         observation=ObservationModel(sigma_pos=sp * 1e-3,
                                                      sigma_rot=float(np.radians(sr)),
                                                      motion_fraction=settings.sigma_motion))

@@ -63,6 +63,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--active-model-error", type=float, default=0.0, metavar="KAPPA",
                    help="with --exploration active: weigh the disagreement against the "
                    "model's expected error, KAPPA x each candidate's predicted motion")
+    p.add_argument("--anneal-stages", type=int, default=1, metavar="N",
+                   help="the filter's most weighting stages per observation: a likelihood "
+                   "that tempering held back is applied in resample-move stages (default 1: "
+                   "its rest is dropped)")
     p.add_argument("--config", help="hardware backend: the hardware YAML file")
     p.add_argument("--out", default="runs/identify", help="output folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
@@ -133,7 +137,7 @@ def run(args: argparse.Namespace) -> int:
         nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg,
         rolling=args.rolling, slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, exploration=args.exploration,
-        active_model_error=args.active_model_error)
+        active_model_error=args.active_model_error, anneal_stages=args.anneal_stages)
     bar = None
 
     def progress(rec) -> None:
