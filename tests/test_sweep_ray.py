@@ -77,3 +77,21 @@ def test_without_ray_the_executor_says_how_to_install_it(sweep_file, tmp_path, c
 def test_address_needs_the_ray_executor(sweep_file, tmp_path):
     assert main(["sweep", str(sweep_file), "--out", str(tmp_path / "o"),
                  "--address", "ray://head:10001", "--quiet"]) == 2
+
+
+@pytest.mark.parametrize("address", ["127.0.0.1:{port}", "ray://127.0.0.1:{port}", "head"])
+def test_an_unreachable_ray_address_is_named_at_once(sweep_file, tmp_path, capsys, address):
+    import socket
+    import time
+
+    with socket.socket() as s:                  # a port that nobody serves once closed
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    address = address.format(port=port)
+    t0 = time.perf_counter()
+    assert main(["sweep", str(sweep_file), "--out", str(tmp_path / "o"), "--executor", "ray",
+                 "--address", address, "--quiet"]) == 2
+    assert time.perf_counter() - t0 < 30
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and repr(address) in err[0]
+    assert not (tmp_path / "o" / "trials").exists()

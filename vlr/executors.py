@@ -8,6 +8,7 @@ Ray is optional (`pip install -e .[cluster]`); it is imported only by `run_ray`.
 from __future__ import annotations
 
 import os
+import socket
 from collections.abc import Callable
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -17,11 +18,27 @@ from vlr.errors import UserError
 if TYPE_CHECKING:
     from vlr.sweep import Trial
 
-__all__ = ["EXECUTORS", "run_local", "run_ray", "import_ray"]
+__all__ = ["EXECUTORS", "run_local", "run_ray", "import_ray", "check_reachable"]
 
 EXECUTORS = ("local", "ray")
 
 OnDone = Callable[[dict[str, Any]], None]
+
+
+def check_reachable(address: str, timeout: float = 5.0) -> None:
+    """A Ray address that no socket answers is one UserError now: `ray.init` on a plain
+    HOST:PORT that nobody serves waits for minutes before it fails. "auto" and "local"
+    are Ray's own and are left to it."""
+    if address in ("auto", "local"):
+        return
+    host, sep, port = address.split("://", 1)[-1].rpartition(":")
+    if not (sep and host and port.isdigit()):
+        raise UserError(f"Ray address {address!r}: expected HOST:PORT, ray://HOST:PORT or "
+                        "auto")
+    try:
+        socket.create_connection((host, int(port)), timeout=timeout).close()
+    except OSError as exc:
+        raise UserError(f"cannot reach the Ray cluster at {address!r}: {exc}") from None
 
 
 # --------------------------------------------------------------------------- local pool
@@ -101,13 +118,15 @@ def run_ray(trials: list[Trial], out: Path, workers: int | None, on_done: OnDone
     `working_dir` (a checkout of this repository) is shipped to the workers with the tasks
     (Ray's runtime_env working_dir), for clusters whose nodes have the dependencies but not
     this code; otherwise each node needs the package installed (docs/SWEEPS.md)."""
+    address = address or os.environ.get("RAY_ADDRESS") or None
+    if address:
+        check_reachable(address)
     ray = import_ray()
     if not trials:
         return
     from vlr.io import write_json_atomic
     from vlr.sweep import trial_path
 
-    address = address or os.environ.get("RAY_ADDRESS") or None
     out = Path(out).resolve()
     # The job's runtime_env (Ray ships a working_dir at the job level only, in ray.init).
     runtime_env: dict[str, Any] = {}
