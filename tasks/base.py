@@ -70,6 +70,9 @@ class HandTaskEnv(gym.Env):
         include_image: add the palm camera frame to the observation ("image"), resized to
             `image_size` (height, width) [px].
         hardware_config: the hardware YAML file (backend "hardware").
+        rolling: the filter's motion model with rolling contacts (`vlr.surface`), and with
+            it the backend's likelihood scales for rolling (`vlr.trial.ROLLING_SIGMA`), as
+            `vlr identify` has by default; False: pinned contacts at 0.5 mm / 1 degree.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
@@ -82,7 +85,7 @@ class HandTaskEnv(gym.Env):
                  command_band: tuple[float, float] = (0.25e-3, 0.4e-3),
                  squeeze: float = 0.0,
                  include_image: bool = False, image_size: tuple[int, int] = (120, 160),
-                 hardware_config: str | None = None) -> None:
+                 hardware_config: str | None = None, rolling: bool = False) -> None:
         if backend not in ("sim", "hardware"):
             raise ValueError(f"backend {backend!r}: use 'sim' or 'hardware'")
         if backend == "hardware" and not hardware_config:
@@ -103,6 +106,9 @@ class HandTaskEnv(gym.Env):
         self.squeeze = float(squeeze)
         self.include_image = bool(include_image)
         self.hardware_config = hardware_config
+        if not isinstance(rolling, bool):
+            raise ValueError(f"rolling {rolling!r} must be True or False")
+        self.rolling = rolling
         self.action_space = spaces.Box(-self.max_step, self.max_step, shape=(3,),
                                        dtype=np.float64)
         # Poses: position within 1 m of the palm [m], rotation vector (norm <= pi) [rad].
@@ -209,7 +215,12 @@ class HandTaskEnv(gym.Env):
         filter_seed = int(self.np_random.integers(0, 2**31 - 1))
         model = HandModel.from_spec(self.hand.spec)
         obj = ObjectParams.from_spec(self.hand.object_spec)
-        motion = self._motion_config()
+        from vlr.observation import ObservationModel
+        from vlr.trial import DEFAULT_SIGMA, ROLLING_SIGMA
+
+        motion = self._motion_config().with_rolling(self.rolling)
+        sp, sr = (ROLLING_SIGMA if self.rolling and self.backend in ROLLING_SIGMA
+                  else DEFAULT_SIGMA)[self.backend]
         self.moves = []
         self.filter_lost = self.grasp_lost = False
         self.grasp_message = ""
@@ -225,8 +236,10 @@ class HandTaskEnv(gym.Env):
         # criterion holds earlier: the baseline fits its Jacobian correction to them.
         cfg = IdentifyConfig(max_iterations=self.identify_iterations,
                              min_iterations=self.identify_iterations,
-                             filter=FilterConfig(n_particles=self.particles, seed=filter_seed,
-                                                 motion=motion))
+                             filter=FilterConfig(
+                                 n_particles=self.particles, seed=filter_seed, motion=motion,
+                                 observation=ObservationModel(sigma_pos=sp * 1e-3,
+                                                              sigma_rot=float(np.radians(sr)))))
         try:
             self.identification = identify(self.hand, observer, model, obj,
                                            nominal_grasp(model, obj,

@@ -92,6 +92,7 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
            (["maze", "--option", "n_runs=0"], "n_runs"),
            (["maze", "--option", "command_band=(-0.001,0.001)"], "command_band"),
            (["maze", "--option", "command_band=((0.001,0.001),0.001)"], "command_band"),
+           (["handwriting", "--option", "rolling=1"], "rolling"),
            (["handwriting", "--option", "colour=1"], "colour")]
     for argv, message in bad:
         assert main(["task", *argv, "--out", str(tmp_path / "out")]) == 2, argv
@@ -100,6 +101,21 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
     assert main(["task", "handwriting", "--out", str(a_file / "x")]) == 2
     assert "--out" in capsys.readouterr().err
     assert not (tmp_path / "out").exists()
+
+
+def test_rolling_reaches_the_tasks_filter_with_its_likelihood():
+    from tasks.handwriting import HandwritingEnv
+    from vlr.trial import DEFAULT_SIGMA, ROLLING_SIGMA
+
+    for rolling, sigma in ((True, ROLLING_SIGMA["sim"]), (False, DEFAULT_SIGMA["sim"])):
+        env = HandwritingEnv(word="I", rolling=rolling, **QUICK)
+        try:
+            env.reset(seed=0)
+            assert env.pf.motion.config.rolling is rolling
+            assert env.pf.obs_model.sigma_pos == pytest.approx(sigma[0] * 1e-3)
+            assert env.pf.obs_model.sigma_rot == pytest.approx(np.radians(sigma[1]))
+        finally:
+            env.close()
 
 
 def test_a_command_band_may_give_each_tendon_its_own_limits():
