@@ -63,6 +63,8 @@ class GapSettings:
         slide_friction, spin_friction: the pads' sliding and torsional [m] friction
             coefficients in the friction rung (`MotionConfig`); by default the sim's pads'
             (`sim.pads`): known, like the pad's radius.
+        contact_stiffness: the model's contact penalty k_c [N/m] (`MotionConfig`), normal
+            and tangential alike.
     """
 
     object: str = "apple"
@@ -76,8 +78,11 @@ class GapSettings:
     spin_stiffness: float = MotionConfig.spin_stiffness
     slide_friction: float = SLIDE_FRICTION
     spin_friction: float = TORSION_FRICTION
+    contact_stiffness: float = MotionConfig.contact_stiffness
 
     def __post_init__(self) -> None:
+        if not (np.isfinite(self.contact_stiffness) and self.contact_stiffness > 0):
+            raise UserError(f"contact stiffness {self.contact_stiffness!r} N/m must be > 0")
         if not isinstance(self.actions, int) or self.actions < 1:
             raise UserError(f"actions {self.actions!r} must be an integer >= 1")
         if not isinstance(self.drift_actions, int) or self.drift_actions < 1:
@@ -173,7 +178,8 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
     model = HandModel.from_spec(rec.hand_spec)
     obj = ObjectParams.from_spec(rec.object_spec)
     cfg = MotionConfig(terms=terms, rolling_substeps=settings.rolling_substeps,
-                       spin_stiffness=settings.spin_stiffness)
+                       spin_stiffness=settings.spin_stiffness,
+                       contact_stiffness=settings.contact_stiffness)
     if friction:
         cfg = replace(cfg, slide_friction=settings.slide_friction,
                       spin_friction=settings.spin_friction)
@@ -271,6 +277,7 @@ def gap_report(settings: GapSettings,
         "spin_stiffness": settings.spin_stiffness,
         "slide_friction": settings.slide_friction,
         "spin_friction": settings.spin_friction,
+        "contact_stiffness": settings.contact_stiffness,
         "true_motion": {"position_mm_mean": float(np.mean(true_p)),
                         "orientation_deg_mean": float(np.mean(true_r))},
         "ratio_position_mean": full["ratio_position_mean"],
@@ -323,6 +330,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--spin-friction", type=float, default=TORSION_FRICTION,
                    help="the pads' torsional friction coefficient [m] in the friction rung "
                    f"(default {TORSION_FRICTION}, the sim's pads')")
+    p.add_argument("--contact-stiffness", type=float, default=MotionConfig.contact_stiffness,
+                   metavar="K_C", help="the model's contact penalty [N/m] (default "
+                   f"{MotionConfig.contact_stiffness:g})")
     p.add_argument("--json", help="write the report (per object, per model rung) as JSON")
     p.set_defaults(func=run)
 
@@ -345,7 +355,8 @@ def run(args: argparse.Namespace) -> int:
                                rolling_substeps=args.substeps,
                                spin_stiffness=args.spin_stiffness,
                                slide_friction=args.slide_friction,
-                               spin_friction=args.spin_friction)
+                               spin_friction=args.spin_friction,
+                               contact_stiffness=args.contact_stiffness)
         rep = gap_report(settings)
         print(format_report(rep) + "\n", flush=True)
         reports.append(rep)
