@@ -114,3 +114,24 @@ def test_likelihood_scales_follow_the_backend_and_the_contact_model():
     assert TrialSettings(backend="sim", rolling=False).sigma == (0.5, 1.0)
     assert TrialSettings(backend="hardware").sigma == (0.5, 1.0)
     assert TrialSettings(backend="sim", sigma_pos_mm=0.2).sigma == (0.2, 0.7)
+
+
+def test_contact_stiffness_and_anneal_stages_reach_the_filter():
+    from vlr.kinematics import HandModel
+    from vlr.motion import MotionConfig
+    from vlr.spec import load_hand
+    from vlr.trial import identify_config
+
+    model = HandModel.from_spec(load_hand("modelo"))
+    default = identify_config(TrialSettings(backend="synthetic", particles=50), model).filter
+    assert default.motion.contact_stiffness == MotionConfig.contact_stiffness
+    assert default.anneal_stages == 1
+    cfg = identify_config(TrialSettings(backend="synthetic", particles=50,
+                                        contact_stiffness=2e4, anneal_stages=4), model).filter
+    assert cfg.motion.contact_stiffness == 2e4 and cfg.anneal_stages == 4
+    for bad, match in ((dict(contact_stiffness=0.0), "contact_stiffness 0.0"),
+                       (dict(contact_stiffness="soft"), "contact_stiffness 'soft'"),
+                       (dict(anneal_stages=0), "anneal_stages 0"),
+                       (dict(anneal_stages=2.5), "anneal_stages 2.5")):
+        with pytest.raises(UserError, match=match):
+            TrialSettings(**bad)

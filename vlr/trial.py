@@ -94,6 +94,8 @@ class TrialSettings:
         exploration: "random" actions (the paper) or "active" (vlr.active).
         active_model_error: with active exploration, the model's expected error as a
             fraction of each candidate's predicted motion (`ActiveExploration.model_error`).
+        contact_stiffness: the motion model's contact penalty k_c [N/m]
+            (`vlr.motion.MotionConfig`); None: its default.
         anneal_stages: the filter's most weighting stages per observation
             (`vlr.filter.FilterConfig.anneal_stages`); 1: a tempered likelihood's rest is
             dropped.
@@ -121,6 +123,7 @@ class TrialSettings:
     exploration: str = "random"
     active_model_error: float = 0.0
     anneal_stages: int = 1
+    contact_stiffness: float | None = None
     config: str | None = None
 
     def __post_init__(self) -> None:
@@ -157,6 +160,9 @@ class TrialSettings:
         if (self.slide_friction is not None or self.spin_friction) and not self.uses_rolling:
             raise UserError("slide_friction and spin_friction act on rolling contacts: set "
                             "rolling too")
+        if self.contact_stiffness is not None and not (
+                math.isfinite(self.contact_stiffness) and self.contact_stiffness > 0):
+            raise UserError(f"contact_stiffness {self.contact_stiffness} N/m must be > 0")
         if not self.prior_spread_deg > 0:
             raise UserError(f"prior_spread_deg {self.prior_spread_deg} must be > 0")
         object.__setattr__(self, "unknowns", tuple(self.unknowns))
@@ -186,10 +192,12 @@ class TrialSettings:
             if not is_int(getattr(self, name)):
                 raise bad(name, "an integer")
         for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg", "sigma_motion",
-                     "slide_friction", "spin_friction", "active_model_error"):
+                     "slide_friction", "spin_friction", "active_model_error",
+                     "contact_stiffness"):
             v = getattr(self, name)
             if not (is_real(v) or (v is None and name in ("sigma_pos_mm", "sigma_rot_deg",
-                                                          "slide_friction"))):
+                                                          "slide_friction",
+                                                          "contact_stiffness"))):
                 raise bad(name, "a number")
         if not isinstance(self.rolling, bool | None):
             raise bad("rolling", "true or false (or none: the backend's default)")
@@ -248,6 +256,8 @@ class TrialSettings:
         from vlr.motion import MotionConfig
 
         cfg = MotionConfig().with_rolling(self.uses_rolling)
+        if self.contact_stiffness is not None:
+            cfg = replace(cfg, contact_stiffness=float(self.contact_stiffness))
         return replace(cfg, slide_friction=(math.inf if self.slide_friction is None
                                             else float(self.slide_friction)),
                        spin_friction=float(self.spin_friction))

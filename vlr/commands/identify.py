@@ -63,6 +63,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--active-model-error", type=float, default=0.0, metavar="KAPPA",
                    help="with --exploration active: weigh the disagreement against the "
                    "model's expected error, KAPPA x each candidate's predicted motion")
+    p.add_argument("--contact-stiffness", type=float, default=None, metavar="K_C",
+                   help="the motion model's contact penalty [N/m] (default 1e6)")
     p.add_argument("--anneal-stages", type=int, default=1, metavar="N",
                    help="the filter's most weighting stages per observation: a likelihood "
                    "that tempering held back is applied in resample-move stages (default 1: "
@@ -137,7 +139,8 @@ def run(args: argparse.Namespace) -> int:
         nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg,
         rolling=args.rolling, slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, exploration=args.exploration,
-        active_model_error=args.active_model_error, anneal_stages=args.anneal_stages)
+        active_model_error=args.active_model_error, anneal_stages=args.anneal_stages,
+        contact_stiffness=args.contact_stiffness)
     bar = None
 
     def progress(rec) -> None:
