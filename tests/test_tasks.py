@@ -75,6 +75,34 @@ def test_handwriting_episode_one_letter_seeded_regression(tmp_path):
     assert e["position_mm_mean"] < 0.15, e
 
 
+def test_task_command_runs_seeds_and_summarises_them(tmp_path):
+    """`vlr task --seeds`: one folder per seed and a summary whose mean is the mean of the
+    seeds' own results (a tiny filter: this checks the plumbing, not the accuracy)."""
+    from vlr.cli import main
+
+    out = tmp_path / "hw"
+    rc = main(["task", "handwriting", "--seeds", "0,1", "--particles", "200",
+               "--identify-iterations", "1", "--quiet", "--option", "word=I",
+               "--out", str(out)])
+    assert rc == 0
+    errs = [json.loads((out / f"seed-{s}" / "result.json").read_text())["errors"]
+            ["position_mm_mean"] for s in (0, 1)]
+    md = (out / "summary.md").read_text()
+    assert f"position error {np.mean(errs):.2f} +- {np.std(errs):.2f} mm" in md, md
+    assert "0.42 ± 0.34" in md     # the paper's figure beside ours
+    rows = (out / "summary.csv").read_text().splitlines()
+    assert rows[0].startswith("task,seed,") and len(rows) == 3
+
+
+def test_task_summary_names_a_failed_seed():
+    from vlr.task_report import summary_markdown
+
+    ok = {"task": "maze", "seed": 0, "errors": {"orientation_deg_mean": 0.5}, "solved": True}
+    md = summary_markdown([ok], {3: "GraspError: fingertips lost"}, "maze")
+    assert "orientation error 0.50 +- 0.00 deg (0.50) | solved 1/1" in md
+    assert "seed 3 failed: GraspError" in md
+
+
 def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
     """One line each (exit 2), before the sim opens, and nothing written."""
     from vlr.cli import main
@@ -93,7 +121,11 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
            (["maze", "--option", "command_band=(-0.001,0.001)"], "command_band"),
            (["maze", "--option", "command_band=((0.001,0.001),0.001)"], "command_band"),
            (["handwriting", "--option", "rolling=1"], "rolling"),
-           (["handwriting", "--option", "colour=1"], "colour")]
+           (["handwriting", "--option", "colour=1"], "colour"),
+           (["handwriting", "--seeds", "0-x"], "seeds"),
+           (["handwriting", "--seeds", "1,1"], "twice"),
+           (["handwriting", "--seeds", "0-1", "--workers", "0"], "--workers"),
+           (["handwriting", "--workers", "2"], "--seeds")]
     for argv, message in bad:
         assert main(["task", *argv, "--out", str(tmp_path / "out")]) == 2, argv
         err = capsys.readouterr().err

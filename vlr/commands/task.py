@@ -5,6 +5,11 @@ and `task.png` (the traced letters over the targets, the marble's path in the ma
 atomically. Arguments, environment options and the output folder are checked before the
 (minutes-long) run, so that a bad one ends in one line, not a traceback after the run.
 
+`--seeds 0-4` runs the task once per seed, each into OUT/seed-N (`--workers` of them at
+once, in processes), then writes OUT/summary.md (mean and SD over seeds of the headline
+figures, beside the paper's) and OUT/summary.csv (one row per seed): issue #6's "five seeds
+per task from one command".
+
 The environments live in the `tasks` package, which plugs in through the `vlr.tasks`
 entry-point group (pyproject.toml), as backends do: `vlr` never imports `tasks`, `sim` or
 `hardware` itself.
@@ -15,6 +20,7 @@ from __future__ import annotations
 import argparse
 import os
 import time
+from dataclasses import dataclass
 from importlib.metadata import entry_points
 from pathlib import Path
 
@@ -34,6 +40,11 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--backend", default="sim", help="sim | hardware")
     p.add_argument("--config", help="hardware backend: the hardware YAML file")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--seeds", metavar="SEEDS",
+                   help="run several seeds (e.g. 0-4 or 0,2,5), each into OUT/seed-N, then "
+                   "write OUT/summary.md and OUT/summary.csv (mean and SD over seeds)")
+    p.add_argument("--workers", type=int, default=1,
+                   help="with --seeds: seeds run at once, one process each (default 1)")
     p.add_argument("--particles", type=int, default=5000,
                    help="particles of the identification in reset")
     p.add_argument("--identify-iterations", type=int, default=15)
@@ -66,10 +77,47 @@ def _parse_options(items: list[str]) -> dict:
     return out
 
 
-def run(args: argparse.Namespace) -> int:
-    import gymnasium as gym
+@dataclass(frozen=True)
+class SeedRun:
+    """One checked `vlr task` run: what a worker process needs (picklable)."""
 
-    from vlr.io import write_json_atomic
+    name: str
+    env_id: str
+    kwargs: dict
+    changes: dict
+    options: dict
+    seed: int
+    out: Path
+    quiet: bool
+
+
+def run(args: argparse.Namespace) -> int:
+    from vlr.sweep import parse_seeds
+
+    seeds = parse_seeds(args.seeds) if args.seeds is not None else None
+    if seeds is not None and len(set(seeds)) != len(seeds):
+        raise UserError(f"--seeds {args.seeds!r}: a seed appears twice")
+    if isinstance(args.workers, bool) or args.workers < 1:
+        raise UserError(f"--workers {args.workers} must be >= 1")
+    if args.workers > 1 and seeds is None:
+        raise UserError("--workers runs several --seeds at once; give --seeds too")
+    name, env_id, kwargs, changes, options = _checked(args)
+    out = Path(args.out or f"runs/task-{args.name}")
+    _check_out(out)
+    if seeds is None:
+        result = run_seed(SeedRun(name, env_id, kwargs, changes, options, args.seed, out,
+                                  args.quiet))
+        print(summary_line(result))
+        print(f"wrote {out / 'result.json'}, {out / 'task.png'}")
+        return 0
+    runs = [SeedRun(name, env_id, kwargs, changes, options, s, out / f"seed-{s}",
+                    args.quiet or args.workers > 1) for s in seeds]
+    return _run_seeds(runs, out, args.workers)
+
+
+def _checked(args: argparse.Namespace) -> tuple[str, str, dict, dict, dict]:
+    """Every argument checked, and the environment made once to check its options."""
+    import gymnasium as gym
 
     found = _tasks()
     if args.name not in found:
@@ -92,18 +140,10 @@ def run(args: argparse.Namespace) -> int:
               "identify_iterations": args.identify_iterations, **options}
     if args.config:
         kwargs["hardware_config"] = args.config
-    out = Path(args.out or f"runs/task-{args.name}")
     try:   # checks the arguments; the backend opens in reset
-        env = gym.make(env_id, **kwargs)
+        gym.make(env_id, **kwargs).close()
     except (TypeError, ValueError) as exc:   # an unknown or bad environment argument
         raise UserError(f"--option: {exc}") from None
-    try:   # the run takes minutes: a folder that cannot be written fails now, not after it
-        out.mkdir(parents=True, exist_ok=True)
-        if not os.access(out, os.W_OK):
-            raise PermissionError(f"{str(out)!r} is not writable")
-    except OSError as exc:
-        env.close()
-        raise UserError(f"--out {str(out)!r}: {exc.strerror or exc}") from None
     changes = {}
     if args.method:
         changes["method"] = args.method
@@ -113,20 +153,44 @@ def run(args: argparse.Namespace) -> int:
         if not 0 < args.reversal_shrink <= 1:
             raise UserError(f"--reversal-shrink {args.reversal_shrink} must be in (0, 1]")
         changes["reversal_shrink"] = args.reversal_shrink
+    return args.name, env_id, kwargs, changes, options
+
+
+def _check_out(out: Path) -> None:
+    """The run takes minutes: a folder that cannot be written fails now, not after it."""
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        if not os.access(out, os.W_OK):
+            raise PermissionError(f"{str(out)!r} is not writable")
+    except OSError as exc:
+        raise UserError(f"--out {str(out)!r}: {exc.strerror or exc}") from None
+
+
+def run_seed(job: SeedRun) -> dict:
+    """Reset (identification), run the baseline policy to the episode's end, write
+    `result.json` and `task.png` into `job.out`; return the result."""
+    import gymnasium as gym
+
+    from vlr.io import write_json_atomic
+
+    if job.env_id not in gym.registry:   # a fresh worker process: register the tasks
+        _tasks()[job.name].load()
+    env = gym.make(job.env_id, **job.kwargs)
+    job.out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
     bar = None
     try:
         try:
-            obs, info = env.reset(seed=args.seed)
+            obs, info = env.reset(seed=job.seed)
         except FloatingPointError as exc:
             raise UserError(f"the identification in reset failed ({exc}); try more "
                             "--particles") from None
         t_identified = time.perf_counter()
-        policy = env.unwrapped.baseline(**changes)   # the policy ships with the env
-        if not args.quiet:
+        policy = env.unwrapped.baseline(**job.changes)   # the policy ships with the env
+        if not job.quiet:
             from tqdm import tqdm
 
-            bar = tqdm(desc=args.name, unit="move")
+            bar = tqdm(desc=job.name, unit="move")
         steps = 0
         while True:
             obs, reward, terminated, truncated, info = env.step(policy(obs))
@@ -139,8 +203,9 @@ def run(args: argparse.Namespace) -> int:
         if bar is not None:
             bar.close()
         task = env.unwrapped
-        result = {"task": args.name, "env": env_id, "backend": args.backend, "seed": args.seed,
-                  "particles": args.particles, "options": options,
+        result = {"task": job.name, "env": job.env_id, "backend": job.kwargs["backend"],
+                  "seed": job.seed, "particles": job.kwargs["particles"],
+                  "options": job.options,
                   "controller": {"method": policy.config.method,
                                  "rows": policy.config.rows, "alpha": policy.config.alpha,
                                  "secant": policy.config.secant,
@@ -150,13 +215,58 @@ def run(args: argparse.Namespace) -> int:
                   "steps": steps,
                   "timing": {"identify_s": t_identified - t0,
                              "wall_s": time.perf_counter() - t0}}
-        write_json_atomic(out / "result.json", result)   # the numbers first, then the picture
-        task.picture(out / "task.png")
+        write_json_atomic(job.out / "result.json", result)   # the numbers, then the picture
+        task.picture(job.out / "task.png")
     finally:
         env.close()
-    print(summary_line(result))
-    print(f"wrote {out / 'result.json'}, {out / 'task.png'}")
-    return 0
+    return result
+
+
+def _run_seeds(runs: list[SeedRun], out: Path, workers: int) -> int:
+    """Each seed in turn (or `workers` at once), then the summary. A seed that fails is
+    named in the summary and the exit status, and the others still run."""
+    from vlr.io import write_text_atomic
+    from vlr.task_report import summary_csv, summary_markdown
+
+    results: list[dict] = []
+    failed: dict[int, str] = {}
+
+    def done(job: SeedRun, result: dict | None, exc: BaseException | None) -> None:
+        if exc is not None:
+            failed[job.seed] = f"{type(exc).__name__}: {exc}"
+            print(f"{job.name} seed {job.seed}: FAILED ({failed[job.seed]})")
+            return
+        results.append(result)
+        print(summary_line(result), flush=True)
+
+    if workers <= 1:
+        for job in runs:
+            try:
+                done(job, run_seed(job), None)
+            except Exception as exc:   # noqa: BLE001 - one seed's failure is reported
+                done(job, None, exc)
+    else:
+        import multiprocessing
+        from concurrent.futures import ProcessPoolExecutor, as_completed
+
+        from vlr.executors import _init_worker
+
+        threads = max(1, (os.cpu_count() or 1) // workers)
+        # spawn, not fork: forking a process whose numba threads already ran is unsafe.
+        with ProcessPoolExecutor(max_workers=min(workers, len(runs)),
+                                 initializer=_init_worker, initargs=(threads,),
+                                 mp_context=multiprocessing.get_context("spawn")) as pool:
+            futures = {pool.submit(run_seed, job): job for job in runs}
+            for f in as_completed(futures):
+                exc = f.exception()
+                done(futures[f], None if exc else f.result(), exc)
+    title = f"vlr task {runs[0].name}, seeds {','.join(str(j.seed) for j in runs)}"
+    write_text_atomic(out / "summary.md", summary_markdown(results, failed, title))
+    if results:
+        write_text_atomic(out / "summary.csv", summary_csv(results))
+    print(summary_markdown(results, failed), end="")
+    print(f"wrote {out / 'summary.md'}" + (f", {out / 'summary.csv'}" if results else ""))
+    return 1 if failed else 0
 
 
 def _identification(result) -> dict:
