@@ -31,6 +31,9 @@ from gymnasium import spaces
 from vlr.controller import ControllerConfig, rotation_log
 from vlr.errors import UserError
 
+# The tasks' scenes, bands and controllers are the Model O's: one tendon per finger, three.
+TENDONS = 3
+
 __all__ = ["Move", "HandTaskEnv", "pose_vector", "save_figure"]
 
 
@@ -109,7 +112,7 @@ class HandTaskEnv(gym.Env):
         if not isinstance(rolling, bool):
             raise ValueError(f"rolling {rolling!r} must be True or False")
         self.rolling = rolling
-        self.action_space = spaces.Box(-self.max_step, self.max_step, shape=(3,),
+        self.action_space = spaces.Box(-self.max_step, self.max_step, shape=(TENDONS,),
                                        dtype=np.float64)
         # Poses: position within 1 m of the palm [m], rotation vector (norm <= pi) [rad].
         lim = np.array([1.0] * 3 + [np.pi] * 3)
@@ -132,7 +135,7 @@ class HandTaskEnv(gym.Env):
         self.episode = 0
         self.identified = 0          # identifications so far (several per episode: cups)
         self._image: np.ndarray | None = None
-        self._u = np.zeros(3)
+        self._u = np.zeros(TENDONS)
 
     # ------------------------------------------------------------------ backend
     def _open_hand(self):
@@ -187,7 +190,13 @@ class HandTaskEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
         if self.hand is None:
-            self.hand = self._open_hand()
+            hand = self._open_hand()
+            n = hand.spec.n_fingers
+            if n != TENDONS:
+                hand.close()
+                raise UserError(f"the tasks are written for the Model O's {TENDONS} tendons; "
+                                f"the backend's hand has {n} fingers")
+            self.hand = hand
         self.episode += 1
         self._prepare_episode()
         self._identify_grasp()
@@ -270,7 +279,8 @@ class HandTaskEnv(gym.Env):
                                 "squeeze?)")
 
     def step(self, action):
-        a = np.clip(np.asarray(action, dtype=float).reshape(3), -self.max_step, self.max_step)
+        a = np.clip(np.asarray(action, dtype=float).reshape(TENDONS), -self.max_step,
+                    self.max_step)
         u = self.commands
         release, pull = self.command_band
         target = np.clip(u + a, self.center - release, self.center + pull)
@@ -378,14 +388,14 @@ class HandTaskEnv(gym.Env):
 
 
 def _band(command_band) -> tuple:
-    """(release, pull), each a number [m] or one per tendon (3 values), all >= 0."""
+    """(release, pull), each a number [m] or one per tendon (TENDONS values), all >= 0."""
     try:
         release, pull = command_band
         parts = [np.asarray(v, dtype=float) for v in (release, pull)]
     except (TypeError, ValueError):
         raise ValueError(f"command_band {command_band!r} must be (release, pull) [m], each a "
                          "number or one per tendon") from None
-    if any(p.shape not in ((), (3,)) or np.any(p < 0) or not np.all(np.isfinite(p))
+    if any(p.shape not in ((), (TENDONS,)) or np.any(p < 0) or not np.all(np.isfinite(p))
            for p in parts):
         raise ValueError(f"command_band {command_band!r}: release and pull must be >= 0, "
                          "each a number or one per tendon [m]")

@@ -218,3 +218,20 @@ def test_handwriting_runs_on_the_hardware_backend_without_ground_truth():
         assert env.unwrapped.metrics()["errors"]["source"] == "camera"
     finally:
         env.close()
+
+
+def test_a_hand_without_three_tendons_is_refused_in_reset(monkeypatch):
+    """The tasks are the Model O's: a backend whose hand has another finger count is one
+    UserError at reset, and the hand is closed again."""
+    from types import SimpleNamespace
+
+    from tasks.handwriting import HandwritingEnv
+    from vlr.errors import UserError
+
+    closed = []
+    fake = SimpleNamespace(spec=SimpleNamespace(n_fingers=2), close=lambda: closed.append(1))
+    monkeypatch.setattr(HandwritingEnv, "_open_hand", lambda self: fake)
+    env = HandwritingEnv(**QUICK)
+    with pytest.raises(UserError, match="3 tendons; the backend's hand has 2 fingers"):
+        env.reset(seed=0)
+    assert closed == [1] and env.hand is None
