@@ -12,6 +12,7 @@ round-off, and below the model's without the term they guard, so losing rolling,
 
 import json
 
+import numpy as np
 import pytest
 
 from sim.gap import LADDER, GapSettings, gap_report
@@ -56,6 +57,10 @@ def test_gap_cli_writes_json(tmp_path, capsys):
     assert all(len(c["per_action"]) == 3 for c in rep["configs"])
     for key in ("ratio_position_mean", "ratio_orientation_mean", "drift_ratio"):
         assert 0 < rep[key] < 1
+    # The per-action ratios along the drift's open-loop path (the model's own state).
+    full = rep["configs"][-1]
+    assert all(np.isfinite(full[f"open_loop_ratio_{k}"]) and full[f"open_loop_ratio_{k}"] > 0
+               for k in ("position_mean", "orientation_mean", "orientation_median"))
     assert "+ friction" in capsys.readouterr().out
 
 
