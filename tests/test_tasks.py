@@ -125,7 +125,9 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
            (["handwriting", "--seeds", "0-x"], "seeds"),
            (["handwriting", "--seeds", "1,1"], "twice"),
            (["handwriting", "--seeds", "0-1", "--workers", "0"], "--workers"),
-           (["handwriting", "--workers", "2"], "--seeds")]
+           (["handwriting", "--workers", "2"], "--seeds"),
+           (["handwriting", "--seeds", "0-1", "--workers", "2", "--backend", "hardware",
+             "--config", "x.yaml"], "one hand")]
     for argv, message in bad:
         assert main(["task", *argv, "--out", str(tmp_path / "out")]) == 2, argv
         err = capsys.readouterr().err

@@ -101,6 +101,9 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--workers {args.workers} must be >= 1")
     if args.workers > 1 and seeds is None:
         raise UserError("--workers runs several --seeds at once; give --seeds too")
+    if args.workers > 1 and args.backend == "hardware":
+        raise UserError("--workers with --backend hardware: there is one hand; run the seeds "
+                        "one after another (--workers 1)")
     name, env_id, kwargs, changes, options = _checked(args)
     out = Path(args.out or f"runs/task-{args.name}")
     _check_out(out)
