@@ -38,14 +38,16 @@ __all__ = ["LADDER", "GapSettings", "record_actions", "measure_gap", "gap_report
 
 _BASE = ("springs", "tendon", "limits", "contacts")
 _ALL = _BASE + ("link_gravity", "object_gravity", "rolling")
-# Model terms switched on in turn: (name, energy terms, friction on the rolling contacts);
-# the last row is the full model.
-LADDER: tuple[tuple[str, tuple[str, ...], bool], ...] = (
-    ("fixed contacts, no weights", _BASE, False),
-    ("+ link weights", _BASE + ("link_gravity",), False),
-    ("+ object weight", _BASE + ("link_gravity", "object_gravity"), False),
-    ("+ rolling", _ALL, False),
-    ("+ friction", _ALL, True),
+# Model terms switched on in turn: (name, energy terms, the rolling contacts' friction:
+# "" none, "cone" the return map between solves (`MotionConfig.cone_return`), "friction" the
+# pads' friction in the energy); the last row is the full model.
+LADDER: tuple[tuple[str, tuple[str, ...], str], ...] = (
+    ("fixed contacts, no weights", _BASE, ""),
+    ("+ link weights", _BASE + ("link_gravity",), ""),
+    ("+ object weight", _BASE + ("link_gravity", "object_gravity"), ""),
+    ("+ rolling", _ALL, ""),
+    ("+ cone return", _ALL, "cone"),
+    ("+ friction", _ALL, "friction"),
 )
 OBJECTS = ("apple", "wine_glass", "toy_block", "flat_screwdriver", "gelatin_box")
 
@@ -174,17 +176,22 @@ def _motion_error(p0, r0, p1, r1, t0, t1) -> tuple[float, float, float, float]:
 
 
 def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
-                friction: bool = False) -> dict:
+                friction: str = "") -> dict:
     """Per-action, static and drift gap of the motion model with `terms` (module docstring),
-    with the pads' friction (`settings`) if `friction`."""
+    with the pads' friction (`settings`): in the energy if `friction` is "friction", as the
+    return map between solves if "cone" (`MotionConfig.cone_return`)."""
+    if friction not in ("", "cone", "friction"):
+        raise ValueError(f"friction {friction!r}: expected '', 'cone' or 'friction'")
     model = HandModel.from_spec(rec.hand_spec)
     obj = ObjectParams.from_spec(rec.object_spec)
     cfg = MotionConfig(terms=terms, rolling_substeps=settings.rolling_substeps,
                        spin_stiffness=settings.spin_stiffness,
                        contact_stiffness=settings.contact_stiffness)
-    if friction:
+    if friction == "friction":
         cfg = replace(cfg, slide_friction=settings.slide_friction,
                       spin_friction=settings.spin_friction)
+    elif friction == "cone":
+        cfg = replace(cfg, cone_return=settings.slide_friction)
     motion = MotionModel(model, obj, cfg)
     # The static settle may travel further than an action may (the model's own equilibrium).
     settle = replace(cfg, jump_theta=1.0, jump_pos=0.05, max_iter=200)
@@ -273,7 +280,7 @@ def _drift(motion: MotionModel, settle: MotionConfig, model: HandModel, rec: Rec
 
 
 def gap_report(settings: GapSettings,
-               ladder: tuple[tuple[str, tuple[str, ...], bool], ...] = LADDER) -> dict:
+               ladder: tuple[tuple[str, tuple[str, ...], str], ...] = LADDER) -> dict:
     """Record the actions once, then measure every rung of `ladder` on them. The top-level
     ratios are the full model's (the last rung)."""
     t0 = time.perf_counter()
@@ -348,7 +355,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the pads' torsional stiffness with rolling [N m/rad] (default "
                    f"{MotionConfig.spin_stiffness})")
     p.add_argument("--slide-friction", type=float, default=SLIDE_FRICTION,
-                   help="the pads' sliding friction coefficient in the friction rung "
+                   help="the pads' sliding friction coefficient in the cone-return and "
+                   "friction rungs "
                    f"(default {SLIDE_FRICTION}, the sim's pads')")
     p.add_argument("--spin-friction", type=float, default=TORSION_FRICTION,
                    help="the pads' torsional friction coefficient [m] in the friction rung "

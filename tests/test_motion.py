@@ -306,3 +306,33 @@ def test_a_settle_has_no_friction(modelo):
 def test_bad_friction_settings_are_named(kw):
     with pytest.raises(ValueError, match=next(iter(kw))):
         MotionConfig(**kw)
+
+
+def test_cone_return_moves_the_glued_grasp_towards_the_frictional_one(modelo):
+    """`MotionConfig.cone_return`: the glued solve, then each contact's stretch returned onto
+    its cone and a glued settle. The settle loads the contacts again, less: one step lowers
+    the worst contact's load (tangential force over mu N; 59 glued, 28 after the step when
+    written) and moves the object part of the way to the frictional solve's place (about a
+    third). A settle (no `u_from`) is unchanged."""
+    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
+    glued = replace(ROLL, gravity=(0.0, 0.0, 0.0))
+    cone = replace(glued, cone_return=FRICTION.slide_friction)
+    friction = replace(FRICTION, gravity=(0.0, 0.0, 0.0))
+    _, st, u0 = grasp(modelo, config=glued, theta=(0.3, 0.3))
+    du = np.array([6e-4, -4e-4, 0.0])
+    gauge = MotionModel(modelo, obj, friction)
+    out = {}
+    for name, cfg in (("cone", cone), ("glued", glued), ("friction", friction)):
+        s = st.copy()
+        status, _ = MotionModel(modelo, obj, cfg).solve(s, u0 + du, u_from=u0)
+        assert np.all(status == 0), name
+        out[name] = (_cone_load(gauge, s).max(), s.pos[0].copy())
+    assert out["glued"][0] > 10.0 and out["cone"][0] < 0.6 * out["glued"][0]
+    to_friction = {k: np.linalg.norm(out[k][1] - out["friction"][1]) for k in ("cone", "glued")}
+    assert to_friction["cone"] < 0.85 * to_friction["glued"], to_friction
+    a, b = st.copy(), st.copy()
+    MotionModel(modelo, obj, cone).solve(a, u0 + 2e-4)
+    MotionModel(modelo, obj, glued).solve(b, u0 + 2e-4)
+    np.testing.assert_array_equal(a.theta, b.theta)
+    with pytest.raises(ValueError, match="cone_return"):
+        replace(ROLL, cone_return=0.0)

@@ -129,9 +129,17 @@ def test_contact_stiffness_and_anneal_stages_reach_the_filter():
     cfg = identify_config(TrialSettings(backend="synthetic", particles=50,
                                         contact_stiffness=2e4, anneal_stages=4), model).filter
     assert cfg.motion.contact_stiffness == 2e4 and cfg.anneal_stages == 4
+    assert default.motion.cone_return == float("inf")
+    cone = identify_config(TrialSettings(backend="synthetic", particles=50, rolling=True,
+                                         cone_return=1.0), model).filter
+    assert cone.motion.cone_return == 1.0
     for bad, match in ((dict(contact_stiffness=0.0), "contact_stiffness 0.0"),
                        (dict(contact_stiffness="soft"), "contact_stiffness 'soft'"),
                        (dict(anneal_stages=0), "anneal_stages 0"),
+                       (dict(cone_return=0.0, rolling=True), "cone_return 0.0"),
+                       (dict(cone_return=1.0, rolling=False), "rolling"),
+                       (dict(cone_return=1.0, rolling=True, slide_friction=1.0),
+                        "one or the other"),
                        (dict(anneal_stages=2.5), "anneal_stages 2.5")):
         with pytest.raises(UserError, match=match):
             TrialSettings(**bad)

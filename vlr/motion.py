@@ -113,6 +113,17 @@ class MotionConfig:
             have 1 mm (`sim.pads.TORSION_FRICTION`); 0 lets them spin freely.
             Friction acts on a command change (`solve(..., u_from=)`) only: a settle has no
             history, so its contacts stick and spin freely as before.
+        cone_return: with rolling and without the pads' friction in the energy, the
+            sliding friction coefficient mu of one return-map step after each action: the
+            command change (`solve(..., u_from=)`) is solved with glued contacts, then each
+            contact's stretch is returned onto its cone mu N (`vlr.surface.roll_contacts`)
+            and the grasp settled again, glued, at the new command. The settle loads the
+            contacts again, less than before: one step goes part of the way from the glued
+            equilibrium to the frictional one (repeated, the steps converge to it; on the
+            test grasp one step goes about a third of the way). Measured by `vlr gap` as
+            its own rung (RESULTS.md 5); its cost is one settle, where the friction's Huber
+            energy costs 3-5x the solve. inf: off. The sim's pads have 1.0
+            (`sim.pads.SLIDE_FRICTION`).
         spin_smoothing: the spin [rad] over which the friction's |s| is rounded off
             (Newton needs a smooth energy); the stick's compliance is tau_max over it.
         follow_substeps: a particle whose solve of a command change (`solve(...,
@@ -130,6 +141,7 @@ class MotionConfig:
     spin_stiffness: float = 0.0
     slide_friction: float = math.inf
     spin_friction: float = 0.0
+    cone_return: float = math.inf
     spin_smoothing: float = 1e-3
     follow_substeps: int = 16
     contact_stiffness: float = 1e6
@@ -157,6 +169,8 @@ class MotionConfig:
         if not (self.slide_friction > 0):
             raise ValueError(f"slide_friction {self.slide_friction!r} must be > 0 (inf: no "
                              "sliding)")
+        if not (self.cone_return > 0):
+            raise ValueError(f"cone_return {self.cone_return!r} must be > 0 (inf: off)")
         if not (np.isfinite(self.spin_friction) and self.spin_friction >= 0):
             raise ValueError(f"spin_friction {self.spin_friction!r} m must be >= 0")
         if not (np.isfinite(self.spin_smoothing) and self.spin_smoothing > 0):
@@ -411,7 +425,25 @@ class MotionModel:
         status, iters = self._solve(state, u, cfg, config is not None, u_from)
         if follow:
             self._follow(state, start, u, u_from, cfg, status, iters)
+        if (u_from is not None and cfg.rolling and not cfg.friction
+                and math.isfinite(cfg.cone_return)):
+            self._cone_return(state, u, cfg, config is not None, status, iters)
         return status, iters
+
+    def _cone_return(self, state: ParticleState, u: np.ndarray, cfg: MotionConfig,
+                     custom: bool, status: np.ndarray, iters: np.ndarray) -> None:
+        """`MotionConfig.cone_return`: the valid particles' contact stretch returned onto
+        the cone, then a glued settle at `u` (in place; a particle that fails the settle
+        takes its status)."""
+        if not state.valid.any():
+            return
+        self.roll(state, surface_normals(self.model, state.theta, state.normals, state.rot),
+                  cfg.cone_return)
+        was = state.valid.copy()
+        st2, it2 = self._solve(state, u, cfg, custom, None)
+        iters += it2
+        lost = was & ~state.valid
+        status[lost] = st2[lost]
 
     def _solve(self, state: ParticleState, u: np.ndarray, cfg: MotionConfig, custom: bool,
                u_from: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:

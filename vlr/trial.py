@@ -96,6 +96,9 @@ class TrialSettings:
             fraction of each candidate's predicted motion (`ActiveExploration.model_error`).
         contact_stiffness: the motion model's contact penalty k_c [N/m]
             (`vlr.motion.MotionConfig`); None: its default.
+        cone_return: with rolling, the sliding friction coefficient of the return map
+            between solves (`vlr.motion.MotionConfig.cone_return`); None: off. Not with
+            slide_friction or spin_friction (the friction in the energy already slides).
         anneal_stages: the filter's most weighting stages per observation
             (`vlr.filter.FilterConfig.anneal_stages`); 1: a tempered likelihood's rest is
             dropped.
@@ -124,6 +127,7 @@ class TrialSettings:
     active_model_error: float = 0.0
     anneal_stages: int = 1
     contact_stiffness: float | None = None
+    cone_return: float | None = None
     config: str | None = None
 
     def __post_init__(self) -> None:
@@ -160,6 +164,14 @@ class TrialSettings:
         if (self.slide_friction is not None or self.spin_friction) and not self.uses_rolling:
             raise UserError("slide_friction and spin_friction act on rolling contacts: set "
                             "rolling too")
+        if self.cone_return is not None:
+            if not (math.isfinite(self.cone_return) and self.cone_return > 0):
+                raise UserError(f"cone_return {self.cone_return} must be > 0 (or none: off)")
+            if not self.uses_rolling:
+                raise UserError("cone_return acts on rolling contacts: set rolling too")
+            if self.slide_friction is not None or self.spin_friction:
+                raise UserError("cone_return is the cheap stand-in for slide_friction and "
+                                "spin_friction: set one or the other")
         if self.contact_stiffness is not None and not (
                 math.isfinite(self.contact_stiffness) and self.contact_stiffness > 0):
             raise UserError(f"contact_stiffness {self.contact_stiffness} N/m must be > 0")
@@ -193,11 +205,12 @@ class TrialSettings:
                 raise bad(name, "an integer")
         for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg", "sigma_motion",
                      "slide_friction", "spin_friction", "active_model_error",
-                     "contact_stiffness"):
+                     "contact_stiffness", "cone_return"):
             v = getattr(self, name)
             if not (is_real(v) or (v is None and name in ("sigma_pos_mm", "sigma_rot_deg",
                                                           "slide_friction",
-                                                          "contact_stiffness"))):
+                                                          "contact_stiffness",
+                                                          "cone_return"))):
                 raise bad(name, "a number")
         if not isinstance(self.rolling, bool | None):
             raise bad("rolling", "true or false (or none: the backend's default)")
@@ -258,6 +271,8 @@ class TrialSettings:
         cfg = MotionConfig().with_rolling(self.uses_rolling)
         if self.contact_stiffness is not None:
             cfg = replace(cfg, contact_stiffness=float(self.contact_stiffness))
+        if self.cone_return is not None:
+            cfg = replace(cfg, cone_return=float(self.cone_return))
         return replace(cfg, slide_friction=(math.inf if self.slide_friction is None
                                             else float(self.slide_friction)),
                        spin_friction=float(self.spin_friction))

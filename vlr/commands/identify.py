@@ -65,6 +65,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "model's expected error, KAPPA x each candidate's predicted motion")
     p.add_argument("--contact-stiffness", type=float, default=None, metavar="K_C",
                    help="the motion model's contact penalty [N/m] (default 1e6)")
+    p.add_argument("--cone-return", type=float, default=None, metavar="MU",
+                   help="with rolling contacts: after each action return the contacts' "
+                   "stretch onto the friction cone MU N and settle again (a cheap stand-in "
+                   "for --slide-friction; default off; the sim's pads have 1.0)")
     p.add_argument("--anneal-stages", type=int, default=1, metavar="N",
                    help="the filter's most weighting stages per observation: a likelihood "
                    "that tempering held back is applied in resample-move stages (default 1: "
@@ -140,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
         rolling=args.rolling, slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, exploration=args.exploration,
         active_model_error=args.active_model_error, anneal_stages=args.anneal_stages,
-        contact_stiffness=args.contact_stiffness)
+        contact_stiffness=args.contact_stiffness, cone_return=args.cone_return)
     bar = None
 
     def progress(rec) -> None:
