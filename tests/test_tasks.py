@@ -121,6 +121,8 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
            (["maze", "--option", "command_band=(-0.001,0.001)"], "command_band"),
            (["maze", "--option", "command_band=((0.001,0.001),0.001)"], "command_band"),
            (["handwriting", "--option", "rolling=1"], "rolling"),
+           (["cups", "--alpha", "0"], "--alpha"),
+           (["cups", "--alpha", "nan"], "--alpha"),
            (["handwriting", "--option", "colour=1"], "colour"),
            (["handwriting", "--seeds", "0-x"], "seeds"),
            (["handwriting", "--seeds", "1,1"], "twice"),

@@ -18,6 +18,7 @@ entry-point group (pyproject.toml), as backends do: `vlr` never imports `tasks`,
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import time
 from dataclasses import dataclass
@@ -55,6 +56,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--reversal-shrink", type=float, default=None, metavar="F",
                    help="scale a tendon's steps by F each time its step reverses sign "
                    "(vlr.controller.ControllerConfig.reversal_shrink; default: the task's)")
+    p.add_argument("--alpha", type=float, default=None,
+                   help="Eq. 12's rotation weight (mm per degree) on the full rows "
+                   "(default: the task's; cups 9.5, the paper's)")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="an environment argument, e.g. word=SCI or letter_height=0.002")
     p.add_argument("--out", default=None, help="output folder (default runs/task-NAME)")
@@ -156,6 +160,10 @@ def _checked(args: argparse.Namespace) -> tuple[str, str, dict, dict, dict]:
         if not 0 < args.reversal_shrink <= 1:
             raise UserError(f"--reversal-shrink {args.reversal_shrink} must be in (0, 1]")
         changes["reversal_shrink"] = args.reversal_shrink
+    if args.alpha is not None:
+        if not (math.isfinite(args.alpha) and args.alpha > 0):
+            raise UserError(f"--alpha {args.alpha} must be a positive number")
+        changes["alpha"] = args.alpha
     return args.name, env_id, kwargs, changes, options
 
 
