@@ -39,6 +39,21 @@ def test_identify_synthetic_writes_result_history_and_plot(tmp_path):
     np.testing.assert_allclose([e["high"] for e in est.values()], high, atol=1e-12)
 
 
+def test_identify_records_each_unknowns_error_per_iteration(tmp_path):
+    out = tmp_path / "stiff"
+    rc = main(["identify", "--backend", "synthetic", "--particles", "1500",
+               "--max-iterations", "2", "--seed", "2", "--unknown", "stiffness:thumb.distal",
+               "--true-stiffness", "thumb.distal=0.045", "--out", str(out), "--quiet"])
+    assert rc == 0
+    result = json.loads((out / "result.json").read_text())
+    path = result["unknown_error_by_iteration"]["stiffness:thumb.distal"]
+    assert len(path) == 3      # the grasp's update and two actions
+    np.testing.assert_allclose(path[-1], result["errors"]["stiffness"]["thumb.distal"],
+                               rtol=1e-3)
+    hist = np.load(out / "history.npz")
+    np.testing.assert_allclose(path, np.abs(hist["mean"][:, -1] - 0.045), rtol=1e-3)
+
+
 def test_identify_sim_runs_from_rendered_frames(tmp_path):
     out = tmp_path / "sim"
     rc = main(["identify", "--backend", "sim", "--object", "gelatin_box", "--particles",

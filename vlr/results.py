@@ -40,6 +40,11 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
         out["proximal_deg_by_iteration"] = [
             round(float(sc.theta_error_deg.reshape(n, k)[:, 0].mean()), 4)
             for sc in result.scores]
+        # Each unknown's error per iteration (SI units): how far the budget was from enough.
+        if result.scores[-1].unknown_error:
+            out["unknown_error_by_iteration"] = {
+                spec: [float(f"{abs(sc.unknown_error[spec]):.4g}") for sc in result.scores]
+                for spec in result.scores[-1].unknown_error}
         s = result.scores[-1]
         err = s.theta_error_deg.reshape(n, k)
         errors = {"proximal_deg_mean": float(err[:, 0].mean()),
