@@ -52,6 +52,9 @@ def test_identify_records_each_unknowns_error_per_iteration(tmp_path):
                                rtol=1e-3)
     hist = np.load(out / "history.npz")
     np.testing.assert_allclose(path, np.abs(hist["mean"][:, -1] - 0.045), rtol=1e-3)
+    # convergence.png plots the unknown beside the joints, against its truth
+    np.testing.assert_allclose(hist["truth_unknowns"], 0.045, rtol=1e-9)
+    assert (out / "convergence.png").stat().st_size > 1000
 
 
 def test_identify_sim_runs_from_rendered_frames(tmp_path):

@@ -101,20 +101,47 @@ def write_outputs(out: Path, result, summary: dict, model, truths: list | None =
         hist["theta_error_deg"] = np.array([s.theta_error_deg for s in result.scores])
     if truths:
         hist["truth_theta"] = np.array([t.theta.ravel() for t in truths])
+    unknowns = list(result.unknowns)
+    if result.scores and unknowns:
+        # the truth of each unknown per iteration: the scored estimate minus its error
+        base = hist["mean"].shape[1] - len(unknowns)
+        hist["truth_unknowns"] = np.array(
+            [[hist["mean"][i, base + j] - sc.unknown_error[spec]
+              for j, spec in enumerate(unknowns)] for i, sc in enumerate(result.scores)])
     with atomic_path(out / "history.npz") as tmp:
         np.savez_compressed(tmp, **hist)
-    _plot(out / "convergence.png", hist, model, n, k)
+    _plot(out / "convergence.png", hist, model, n, k, unknowns)
     write_json_atomic(out / "result.json", summary)
 
 
-def _plot(path: Path, hist: dict, model, n: int, k: int) -> None:
+# Plot units of the unknowns: (scale from SI, axis label).
+_UNKNOWN_UNITS = {"stiffness": (1.0, "stiffness [N m/rad]"), "length": (1e3, "length [mm]"),
+                  "tendon": (1e-3, "tendon stiffness [N/mm]")}
+
+
+def _plot(path: Path, hist: dict, model, n: int, k: int, unknowns: list[str] = ()) -> None:
+    """One panel per finger's proximal joint, then one per extra unknown: the estimate, its
+    95% interval and, where scored, the truth."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
     it = hist["iteration"]
-    fig, axes = plt.subplots(1, n, figsize=(4 * n, 3.2), squeeze=False)
+    cols = n + len(unknowns)
+    fig, axes = plt.subplots(1, cols, figsize=(4 * cols, 3.2), squeeze=False)
+    base = hist["mean"].shape[1] - len(unknowns)
+    for j, spec in enumerate(unknowns):
+        ax = axes[0, n + j]
+        scale, label = _UNKNOWN_UNITS.get(spec.partition(":")[0], (1.0, spec))
+        c = base + j
+        ax.fill_between(it, scale * hist["low"][:, c], scale * hist["high"][:, c], alpha=0.3)
+        ax.plot(it, scale * hist["mean"][:, c])
+        if "truth_unknowns" in hist:
+            ax.plot(it, scale * hist["truth_unknowns"][:, j], "k--")
+        ax.set_title(spec)
+        ax.set_xlabel("iteration")
+        ax.set_ylabel(label)
     for i, name in enumerate(model.names):
         ax = axes[0, i]
         j = i * k

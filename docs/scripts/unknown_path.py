@@ -1,0 +1,50 @@
+"""Each unknown's error along a sweep's trials, at chosen action counts (docs/RESULTS.md
+section 2, "The stiffness row with 40 actions").
+
+A one-off reader, not part of the package. For every finished trial of a sweep folder it
+reads `unknown_error_by_iteration` from the trial record (entry 0 is the grasp's update,
+entry n the error after n actions; SI units) and prints, per case and unknown, the error at
+each asked action count per seed, and the mean and sd over seeds.
+
+    python docs/scripts/unknown_path.py runs/sweep-sim-60k-stiffness-40 [--at 15 20 30 40]
+"""
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+
+def paths(out: Path):
+    """(case, seed, unknown, errors per iteration) of each finished trial in OUT/trials."""
+    for f in sorted((out / "trials").glob("*.json")):
+        rec = json.loads(f.read_text())
+        if rec.get("status") != "ok":
+            continue
+        by_it = rec["result"].get("unknown_error_by_iteration") or {}
+        for spec, errs in by_it.items():
+            yield rec["case"], rec["settings"]["seed"], spec, errs
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("out", type=Path, help="a sweep's output folder")
+    ap.add_argument("--at", type=int, nargs="+", default=[15, 20, 30, 40],
+                    help="action counts (default 15 20 30 40)")
+    args = ap.parse_args()
+    groups: dict[tuple[str, str], dict[int, list[float]]] = {}
+    for case, seed, spec, errs in paths(args.out):
+        row = [errs[n] if n < len(errs) else float("nan") for n in args.at]
+        print(f"{case} | {spec} | seed {seed} | "
+              + " ".join(f"{n}: {e:.4g}" for n, e in zip(args.at, row, strict=True)))
+        groups.setdefault((case, spec), {})[seed] = row
+    for (case, spec), seeds in groups.items():
+        a = np.array(list(seeds.values()))
+        print(f"{case} | {spec} | {len(seeds)} seeds | " + " ".join(
+            f"{n}: {np.nanmean(a[:, j]):.4f} ± {np.nanstd(a[:, j], ddof=1):.4f}"
+            for j, n in enumerate(args.at)))
+
+
+if __name__ == "__main__":
+    main()
