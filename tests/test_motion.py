@@ -336,3 +336,43 @@ def test_cone_return_moves_the_glued_grasp_towards_the_frictional_one(modelo):
     np.testing.assert_array_equal(a.theta, b.theta)
     with pytest.raises(ValueError, match="cone_return"):
         replace(ROLL, cone_return=0.0)
+
+
+def test_a_hypothesized_link_length_scales_the_links_mass_and_centre(modelo):
+    """A particle whose left finger is 40 mm long with its pad 27 mm out (NF1's make, an
+    unknown length) weighs its links like a hand built with that finger: masses and centres
+    of mass along the link scaled with the lengths (`MotionConfig.link_scaling`). Without
+    the scaling (the default) it keeps the Model O's links, and the two differ."""
+    s = np.array([40 / 62, 27 / 32])
+    left = modelo.chains[1]
+    built = replace(left, lengths=(left.lengths[0] * s[0],),
+                    pad_center=(*left.pad_center[:2], left.pad_center[2] * s[1]),
+                    link_masses=tuple(m * f for m, f in zip(left.link_masses, s, strict=True)),
+                    link_coms=tuple((c[0], c[1], c[2] * f)
+                                    for c, f in zip(left.link_coms, s, strict=True)))
+    nf1 = replace(modelo, chains=(modelo.chains[0], built, modelo.chains[2]))
+    gravity_only = MotionConfig(terms=("link_gravity",), link_scaling=True)
+    th = np.tile(np.array([-0.2, 0.9]), (3, 1))
+    normals = normals_from_angles(np.zeros(3), np.zeros(3))
+
+    def energy(model, segments, config):
+        st = ParticleState.nominal(model, 1, th, normals, np.zeros(3), np.eye(3))
+        if segments is not None:
+            st.segments[0] = segments
+        e, g, _ = MotionModel(model, OBJ, config).evaluate(st, 0, np.zeros(3))
+        return e, g
+
+    hypothesized = modelo.segments.copy()
+    hypothesized[1] *= s
+    e_built, g_built = energy(nf1, None, gravity_only)
+    e_scaled, g_scaled = energy(modelo, hypothesized, gravity_only)
+    assert e_scaled == pytest.approx(e_built, rel=1e-12)
+    np.testing.assert_allclose(g_scaled, g_built, rtol=1e-10, atol=1e-15)
+    e_fixed, _ = energy(modelo, hypothesized, replace(gravity_only, link_scaling=False))
+    assert abs(e_fixed - e_built) > 0.1 * abs(e_built - energy(modelo, None, gravity_only)[0])
+    # The NumPy reference scales alike (the kernel is tested against it).
+    mm = MotionModel(modelo, OBJ, gravity_only)
+    st = ParticleState.nominal(modelo, 1, th, normals, np.zeros(3), np.eye(3))
+    st.segments[0] = hypothesized
+    assert reference_energy(mm, st, 0, np.zeros(3), st.theta[0], st.pos[0],
+                            st.rot[0]) == pytest.approx(e_scaled, rel=1e-12)

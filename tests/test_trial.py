@@ -116,7 +116,7 @@ def test_likelihood_scales_follow_the_backend_and_the_contact_model():
     assert TrialSettings(backend="sim", sigma_pos_mm=0.2).sigma == (0.2, 0.7)
 
 
-def test_contact_stiffness_and_anneal_stages_reach_the_filter():
+def test_contact_stiffness_anneal_stages_and_link_scaling_reach_the_filter():
     from vlr.kinematics import HandModel
     from vlr.motion import MotionConfig
     from vlr.spec import load_hand
@@ -133,7 +133,12 @@ def test_contact_stiffness_and_anneal_stages_reach_the_filter():
     cone = identify_config(TrialSettings(backend="synthetic", particles=50, rolling=True,
                                          cone_return=1.0), model).filter
     assert cone.motion.cone_return == 1.0
-    for bad, match in ((dict(contact_stiffness=0.0), "contact_stiffness 0.0"),
+    assert not default.motion.link_scaling
+    scaled = identify_config(TrialSettings(backend="synthetic", particles=50,
+                                           link_scaling=True), model).filter
+    assert scaled.motion.link_scaling
+    for bad, match in ((dict(link_scaling="yes"), "link_scaling 'yes'"),
+                       (dict(contact_stiffness=0.0), "contact_stiffness 0.0"),
                        (dict(contact_stiffness="soft"), "contact_stiffness 'soft'"),
                        (dict(anneal_stages=0), "anneal_stages 0"),
                        (dict(cone_return=0.0, rolling=True), "cone_return 0.0"),

@@ -213,7 +213,7 @@ def _spin_apply(i, k_n, f1, f2, cx, jw0, jw1, jw2, gA, A, B, gC, C):
 
 @njit(cache=True)
 def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
-              base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+              base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
               omass, ocom, grav, flags, prm,
               gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk):
     """Energy of one particle (Eq. 6, 7 compliant, 8 as penalty or rolling, limits, gravity)
@@ -271,8 +271,13 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
             gfz = rb[0, 2] * grav[0] + rb[1, 2] * grav[1] + rb[2, 2] * grav[2]
             gb = grav[0] * base_pos[i, 0] + grav[1] * base_pos[i, 1] + grav[2] * base_pos[i, 2]
             for k in range(k_n):
-                m_k = lmass[i, k]
-                cy, cz = lcom[i, k, 1], lcom[i, k, 2]
+                # A link whose length this particle hypothesizes (an unknown length) is
+                # taken to be of the nominal link's make: its mass and its centre of mass
+                # along the link scale with the length (lseg: the lengths the masses were
+                # given for; 0 turns the scaling off). Nominal lengths give exactly 1.
+                sc = seg[i, k] / lseg[i, k] if lseg[i, k] > 0.0 else 1.0
+                m_k = lmass[i, k] * sc
+                cy, cz = lcom[i, k, 1], lcom[i, k, 2] * sc
                 py = qy[k] + cy * cphi[k] + cz * sphi[k]
                 pz = qz[k] - cy * sphi[k] + cz * cphi[k]
                 e -= m_k * (gb + gfx * lcom[i, k, 0] + gfy * py + gfz * pz)
@@ -563,7 +568,7 @@ def _rotate3(R, w0, w1, w2, out):
 
 @njit(cache=True)
 def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
-               base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+               base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
                omass, ocom, grav, flags, prm, max_iter,
                gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk,
                th_t, p_t, R_t, dth, dc, La, X, y, S, col, th0, p0):
@@ -581,7 +586,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
     for a in range(3):
         p0[a] = p[a]
     e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
-                  base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+                  base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
                   omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk)
     if not math.isfinite(e):
         return NONFINITE, 0
@@ -634,7 +639,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
             w0, w1, w2 = t * dc[3], t * dc[4], t * dc[5]
             _rotate3(R, w0, w1, w2, R_t)
             e_t = _evaluate(th_t, seg[q], nrm[q], anc[q], rl, p_t, R_t, stiff[q], kt[q], u,
-                            base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy,
+                            base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy,
                             pad_r, omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi,
                             qy, qz, jac, M, vk)
             if math.isfinite(e_t) and e_t <= e + 1e-4 * t * gd + tol_e:
@@ -661,7 +666,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                                               base_rot, pad_xy, pad_r, prm, sphi, cphi, qy,
                                               qz)):
                 e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
-                              base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy,
+                              base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy,
                               pad_r, omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi,
                               cphi, qy, qz, jac, M, vk)
             if t == 1.0:
@@ -679,7 +684,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
             if mu > 1e12:
                 break
             e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
-                          base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+                          base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
                           omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz,
                           jac, M, vk)
     # Jump check: a change far beyond what the action can cause means another branch.
@@ -699,7 +704,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
 
 @njit(parallel=True, cache=True, fastmath=False)
 def solve_batch(theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
-                base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+                base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
                 omass, ocom, grav, flags, prm, max_iter, active, status, iters):
     """Equilibrium (Eq. 9) of every active particle at tendon command u, in place."""
     n_p, n_f, k_n = theta.shape
@@ -738,7 +743,7 @@ def solve_batch(theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                 iters[q] = 0
                 continue
             st, it = _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
-                                base_pos, base_rot, radii, rest, lo, hi, lmass, lcom,
+                                base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg,
                                 pad_xy, pad_r, omass, ocom, grav, flags, prm, max_iter,
                                 gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk,
                                 th_t, p_t, R_t, dth, dc, La, X, y, S, col, th0, p0)
@@ -748,7 +753,7 @@ def solve_batch(theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
 
 @njit(cache=True)
 def evaluate_one(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
-                 base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+                 base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
                  omass, ocom, grav, flags, prm, gA, gC, A, B, C):
     """Energy, gradient and Hessian blocks of one particle (for tests and diagnostics)."""
     k_n = th.shape[1]
@@ -760,5 +765,5 @@ def evaluate_one(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
     M = np.empty((3, 3))
     vk = np.empty((6, 3))
     return _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
-                     base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+                     base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
                      omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk)

@@ -99,6 +99,8 @@ class TrialSettings:
         cone_return: with rolling, the sliding friction coefficient of the return map
             between solves (`vlr.motion.MotionConfig.cone_return`); None: off. Not with
             slide_friction or spin_friction (the friction in the energy already slides).
+        link_scaling: a link of unknown length weighs as the nominal link scaled to its
+            length (`vlr.motion.MotionConfig.link_scaling`); False: the nominal weights.
         anneal_stages: the filter's most weighting stages per observation
             (`vlr.filter.FilterConfig.anneal_stages`); 1: a tempered likelihood's rest is
             dropped.
@@ -128,6 +130,7 @@ class TrialSettings:
     anneal_stages: int = 1
     contact_stiffness: float | None = None
     cone_return: float | None = None
+    link_scaling: bool = False
     config: str | None = None
 
     def __post_init__(self) -> None:
@@ -212,6 +215,8 @@ class TrialSettings:
                                                           "contact_stiffness",
                                                           "cone_return"))):
                 raise bad(name, "a number")
+        if not isinstance(self.link_scaling, bool):
+            raise bad("link_scaling", "true or false")
         if not isinstance(self.rolling, bool | None):
             raise bad("rolling", "true or false (or none: the backend's default)")
         if self.exploration not in ("random", "active"):
@@ -273,6 +278,8 @@ class TrialSettings:
             cfg = replace(cfg, contact_stiffness=float(self.contact_stiffness))
         if self.cone_return is not None:
             cfg = replace(cfg, cone_return=float(self.cone_return))
+        if self.link_scaling:
+            cfg = replace(cfg, link_scaling=True)
         return replace(cfg, slide_friction=(math.inf if self.slide_friction is None
                                             else float(self.slide_friction)),
                        spin_friction=float(self.spin_friction))

@@ -69,6 +69,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with rolling contacts: after each action return the contacts' "
                    "stretch onto the friction cone MU N and settle again (a cheap stand-in "
                    "for --slide-friction; default off; the sim's pads have 1.0)")
+    p.add_argument("--link-scaling", action="store_true",
+                   help="a link of unknown length weighs as the nominal link scaled to its "
+                   "length (default: the nominal weights)")
     p.add_argument("--anneal-stages", type=int, default=1, metavar="N",
                    help="the filter's most weighting stages per observation: a likelihood "
                    "that tempering held back is applied in resample-move stages (default 1: "
@@ -144,7 +147,8 @@ def run(args: argparse.Namespace) -> int:
         rolling=args.rolling, slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, exploration=args.exploration,
         active_model_error=args.active_model_error, anneal_stages=args.anneal_stages,
-        contact_stiffness=args.contact_stiffness, cone_return=args.cone_return)
+        contact_stiffness=args.contact_stiffness, cone_return=args.cone_return,
+        link_scaling=args.link_scaling)
     bar = None
 
     def progress(rec) -> None:
