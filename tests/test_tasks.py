@@ -122,6 +122,7 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
            (["maze", "--option", "command_band=((0.001,0.001),0.001)"], "command_band"),
            (["handwriting", "--option", "rolling=1"], "rolling"),
            (["cups", "--alpha", "0"], "--alpha"),
+           (["cups", "--option", "level_about=rim"], "level_about"),
            (["cups", "--alpha", "nan"], "--alpha"),
            (["handwriting", "--option", "colour=1"], "colour"),
            (["handwriting", "--seeds", "0-x"], "seeds"),
