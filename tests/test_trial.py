@@ -117,6 +117,7 @@ def test_likelihood_scales_follow_the_backend_and_the_contact_model():
 
 
 def test_contact_stiffness_anneal_stages_and_link_scaling_reach_the_filter():
+    from vlr.filter import FilterConfig
     from vlr.kinematics import HandModel
     from vlr.motion import MotionConfig
     from vlr.spec import load_hand
@@ -137,7 +138,13 @@ def test_contact_stiffness_anneal_stages_and_link_scaling_reach_the_filter():
     scaled = identify_config(TrialSettings(backend="synthetic", particles=50,
                                            link_scaling=True), model).filter
     assert scaled.motion.link_scaling
+    assert default.jitter_h == FilterConfig.jitter_h
+    narrow = identify_config(TrialSettings(backend="synthetic", particles=50, jitter_h=0.1),
+                             model).filter
+    assert narrow.jitter_h == 0.1
     for bad, match in ((dict(link_scaling="yes"), "link_scaling 'yes'"),
+                       (dict(jitter_h=1.0), "jitter_h 1.0"),
+                       (dict(jitter_h="wide"), "jitter_h 'wide'"),
                        (dict(contact_stiffness=0.0), "contact_stiffness 0.0"),
                        (dict(contact_stiffness="soft"), "contact_stiffness 'soft'"),
                        (dict(anneal_stages=0), "anneal_stages 0"),

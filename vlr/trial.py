@@ -99,6 +99,8 @@ class TrialSettings:
         cone_return: with rolling, the sliding friction coefficient of the return map
             between solves (`vlr.motion.MotionConfig.cone_return`); None: off. Not with
             slide_friction or spin_friction (the friction in the energy already slides).
+        jitter_h: the filter's Liu-West bandwidth (`vlr.filter.FilterConfig.jitter_h`);
+            None: its default.
         link_scaling: a link of unknown length weighs as the nominal link scaled to its
             length (`vlr.motion.MotionConfig.link_scaling`); False: the nominal weights.
         anneal_stages: the filter's most weighting stages per observation
@@ -131,6 +133,7 @@ class TrialSettings:
     contact_stiffness: float | None = None
     cone_return: float | None = None
     link_scaling: bool = False
+    jitter_h: float | None = None
     config: str | None = None
 
     def __post_init__(self) -> None:
@@ -215,6 +218,9 @@ class TrialSettings:
                                                           "contact_stiffness",
                                                           "cone_return"))):
                 raise bad(name, "a number")
+        if self.jitter_h is not None and not (is_real(self.jitter_h)
+                                              and 0 <= self.jitter_h < 1):
+            raise bad("jitter_h", "a number in [0, 1) (or none: the filter's default)")
         if not isinstance(self.link_scaling, bool):
             raise bad("link_scaling", "true or false")
         if not isinstance(self.rolling, bool | None):
@@ -417,6 +423,8 @@ def identify_config(settings: TrialSettings, model):
                         unknowns=settings.unknowns,
                         theta_spread=float(np.radians(settings.prior_spread_deg)),
                         anneal_stages=settings.anneal_stages,
+                        **({} if settings.jitter_h is None
+                           else {"jitter_h": float(settings.jitter_h)}),
                         observation=ObservationModel(sigma_pos=sp * 1e-3,
                                                      sigma_rot=float(np.radians(sr)),
                                                      motion_fraction=settings.sigma_motion))
