@@ -160,3 +160,22 @@ def test_the_row_compares_the_proximal_links_alone_with_the_paper():
     assert summarize_rows([row])[0]["proximal link error [mm]"] == "3.00"
     rec["result"]["errors"] = {"link_length_mm_by_joint": {"left.distal": 2.0}}
     assert "proximal_link_mm" not in _row(rec)
+
+
+def test_a_grid_setting_splits_the_summary_instead_of_being_averaged(tmp_path):
+    from vlr.sweep import varying_settings, write_tables
+
+    def rec(seed, h, err):
+        return {"case": "apple", "status": "ok",
+                "settings": {"object": "apple", "seed": seed, "jitter_h": h,
+                             "nominal_theta_deg": [-10, 15]},
+                "result": {"errors": {"proximal_deg_mean": err}}}
+
+    records = [rec(0, 0.4, 1.0), rec(1, 0.4, 3.0), rec(0, 0.1, 10.0), rec(1, 0.1, 20.0)]
+    assert varying_settings(records) == ["jitter_h"]   # the seed is not a grid key
+    write_tables(tmp_path, records)
+    summary = (tmp_path / "summary.csv").read_text().splitlines()
+    assert len(summary) == 3 and "jitter_h" in summary[0]
+    assert any(",0.4," in line and "2.00 ± 1.41" in line for line in summary)
+    assert any(",0.1," in line and "15.00 ± 7.07" in line for line in summary)
+    assert "jitter_h" in (tmp_path / "table.csv").read_text().splitlines()[0]

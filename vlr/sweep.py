@@ -335,9 +335,31 @@ SUMMARY_COLUMNS = [("proximal [deg]", "proximal_deg", 2),
                    ("proximal link error [mm]", "proximal_link_mm", 2)]
 
 
-def summarize_rows(rows: list[dict[str, Any]]) -> list[dict[str, str]]:
-    """Mean ± sd over seeds per (case, backend, object, hand, true hand, particles)."""
-    key_names = ("case", "backend", "object", "hand", "true_hand", "particles")
+def varying_settings(records: list[dict[str, Any]]) -> list[str]:
+    """The settings, the seed aside, that differ between the trials of one case: a sweep's
+    grid keys (`grid: {jitter_h: [0.4, 0.2]}`). Each gets a column in the tables and splits
+    the summary, so that a grid's values are not averaged together."""
+    by_case: dict[Any, list[dict[str, Any]]] = {}
+    for r in records:
+        by_case.setdefault(r.get("case"), []).append(r.get("settings") or {})
+    keys: set[str] = set()
+    for settings in by_case.values():
+        for k in set().union(*settings) - {"seed"}:
+            if len({json.dumps(st.get(k), sort_keys=True) for st in settings}) > 1:
+                keys.add(k)
+    return sorted(keys)
+
+
+def _setting(rec: dict[str, Any], key: str) -> Any:
+    v = (rec.get("settings") or {}).get(key)
+    return json.dumps(v) if isinstance(v, list | dict) else v
+
+
+def summarize_rows(rows: list[dict[str, Any]],
+                   grid: Iterable[str] = ()) -> list[dict[str, str]]:
+    """Mean ± sd over seeds per (case, backend, object, hand, true hand, particles) and per
+    value of each `grid` setting (`varying_settings`)."""
+    key_names = ("case", "backend", "object", "hand", "true_hand", "particles", *grid)
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for r in rows:
         groups.setdefault(tuple(r.get(k) for k in key_names), []).append(r)
@@ -389,8 +411,9 @@ def write_tables(out: Path, records: list[dict[str, Any]], title: str = "sweep",
                  note: str = "") -> dict[str, Path]:
     """table.csv (per trial), summary.csv and summary.md (per case), written atomically."""
     out.mkdir(parents=True, exist_ok=True)
-    rows = [_row(r) for r in records]
-    summary = summarize_rows(rows)
+    grid = varying_settings(records)
+    rows = [{**_row(r), **{k: _setting(r, k) for k in grid}} for r in records]
+    summary = summarize_rows(rows, grid)
     paths = {"table": out / "table.csv", "summary_csv": out / "summary.csv",
              "summary_md": out / "summary.md"}
     write_text_atomic(paths["table"], _csv_text(rows))
