@@ -15,7 +15,8 @@ A sweep is a YAML file (or the equivalent `vlr sweep` flags):
 Trials = cases x grid x seeds. Each finished trial is written atomically to
 `OUT/trials/<id>.json` (its settings and its result, or its error), so an interrupted sweep
 resumes without repeating a finished trial (`--resume`); `OUT/table.csv` (one row per trial)
-and `OUT/summary.csv` + `OUT/summary.md` (mean and sd over seeds per case), with
+and `OUT/summary.csv` + `OUT/summary.md` (mean and sd over seeds per case, and per value of
+every setting that varies within a case, such as a grid key), with
 `OUT/boxplots.png` (errors per case and object, `vlr.plots.boxplots`), are rebuilt from those
 files alone.
 """
