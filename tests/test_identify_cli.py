@@ -71,6 +71,10 @@ def test_identify_bad_input_is_one_clear_line(tmp_path, capsys):
                "--out", str(tmp_path), "--quiet"])
     assert rc == 2
     assert "pinky" in capsys.readouterr().err
+    rc = main(["identify", "--backend", "synthetic", "--jitter-h", "1.5", "--out",
+               str(tmp_path), "--quiet"])
+    assert rc == 2
+    assert "jitter_h 1.5" in capsys.readouterr().err
     rc = main(["identify", "--backend", "nowhere", "--out", str(tmp_path), "--quiet"])
     assert rc == 2
     assert "unknown backend 'nowhere'" in capsys.readouterr().err

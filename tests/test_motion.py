@@ -376,3 +376,18 @@ def test_a_hypothesized_link_length_scales_the_links_mass_and_centre(modelo):
     st.segments[0] = hypothesized
     assert reference_energy(mm, st, 0, np.zeros(3), st.theta[0], st.pos[0],
                             st.rot[0]) == pytest.approx(e_scaled, rel=1e-12)
+
+
+def test_a_per_call_config_gets_its_own_link_scaling(modelo):
+    """`solve(config=...)` weighs the links as that config says, not as the model's own."""
+    mm_off, st, u0 = grasp(modelo, config=PIN)
+    st.segments[0, 1] *= 0.9                              # the left finger's lengths
+    mm_on = MotionModel(modelo, OBJ, replace(PIN, link_scaling=True))
+    free = dict(max_iter=500, jump_theta=math.pi, jump_pos=1.0)
+    scaled = replace(PIN, link_scaling=True, **free)
+    a, b, c = st.copy(), st.copy(), st.copy()
+    assert mm_off.solve(a, u0, scaled)[0][0] == 0
+    assert mm_on.solve(b, u0, scaled)[0][0] == 0
+    assert mm_off.solve(c, u0, replace(PIN, **free))[0][0] == 0
+    np.testing.assert_array_equal(a.theta, b.theta)
+    assert np.abs(a.theta - c.theta).max() > 1e-6

@@ -173,6 +173,8 @@ def test_a_grid_setting_splits_the_summary_instead_of_being_averaged(tmp_path):
 
     records = [rec(0, 0.4, 1.0), rec(1, 0.4, 3.0), rec(0, 0.1, 10.0), rec(1, 0.1, 20.0)]
     assert varying_settings(records) == ["jitter_h"]   # the seed is not a grid key
+    other = {**records[1], "settings": {**records[1]["settings"], "object": "wine_glass"}}
+    assert varying_settings(records + [other]) == ["jitter_h"]  # object has its column
     write_tables(tmp_path, records)
     summary = (tmp_path / "summary.csv").read_text().splitlines()
     assert len(summary) == 3 and "jitter_h" in summary[0]

@@ -360,13 +360,15 @@ class MotionModel:
             np.ascontiguousarray(lim[..., 0]), np.ascontiguousarray(lim[..., 1]),
             np.ascontiguousarray(model.link_masses), np.ascontiguousarray(model.link_coms),
             np.ascontiguousarray(model.segments if self.config.link_scaling
-                                 else np.zeros_like(model.segments)),
+                                 else np.zeros_like(model.segments)),   # lseg: [8]
             np.ascontiguousarray(model.pad_center[:, :2]),
             np.ascontiguousarray(model.pad_radius),
             float(obj.mass), np.asarray(obj.com, dtype=float),
             np.asarray(self.config.gravity, dtype=float))
         self._flags = self.config.flags()
         self._prm = self._params(self.config)
+        self._lseg_off = np.zeros_like(self._shared[8])
+        self._lseg_on = np.ascontiguousarray(model.segments)
         self._prm_settle = self._params(self.config, history=False)
         self._no_roll = np.zeros((1, model.n_fingers, kern.N_RL))
 
@@ -408,6 +410,17 @@ class MotionModel:
         gap = (np.linalg.norm(centre - local, axis=-1)
                - (self.obj.surface.kernel_radius + self.model.pad_radius))
         return self.config.contact_stiffness * np.maximum(0.0, -gap)
+
+    def _shared_for(self, cfg: MotionConfig) -> tuple:
+        """The kernel's shared arrays for `cfg`: the model's own, but with the gravity and
+        the link scaling a per-call config asks for."""
+        if (cfg.link_scaling == self.config.link_scaling
+                and tuple(cfg.gravity) == tuple(self.config.gravity)):
+            return self._shared
+        shared = list(self._shared)
+        shared[8] = self._lseg_on if cfg.link_scaling else self._lseg_off
+        shared[-1] = np.asarray(cfg.gravity, dtype=float)
+        return tuple(shared)
 
     def solve(self, state: ParticleState, u: np.ndarray, config: MotionConfig | None = None,
               u_from: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -489,7 +502,7 @@ class MotionModel:
                     if cfg.rolling else self._no_roll)
             kern.solve_batch(state.theta, state.segments, state.normals, state.anchors,
                              roll, state.pos, state.rot, state.stiffness, state.tendon, target,
-                             *self._shared, flags, prm, budgets[j], state.valid,
+                             *self._shared_for(cfg), flags, prm, budgets[j], state.valid,
                              step_status, it)
             iters += it
             # A particle keeps the status of the substep it failed in (later ones say only

@@ -336,6 +336,10 @@ SUMMARY_COLUMNS = [("proximal [deg]", "proximal_deg", 2),
                    ("proximal link error [mm]", "proximal_link_mm", 2)]
 
 
+# What the summary is always split by; `varying_settings` adds a sweep's grid keys.
+SUMMARY_KEYS = ("case", "backend", "object", "hand", "true_hand", "particles")
+
+
 def varying_settings(records: list[dict[str, Any]]) -> list[str]:
     """The settings, the seed aside, that differ between the trials of one case: a sweep's
     grid keys (`grid: {jitter_h: [0.4, 0.2]}`). Each gets a column in the tables and splits
@@ -345,7 +349,7 @@ def varying_settings(records: list[dict[str, Any]]) -> list[str]:
         by_case.setdefault(r.get("case"), []).append(r.get("settings") or {})
     keys: set[str] = set()
     for settings in by_case.values():
-        for k in set().union(*settings) - {"seed"}:
+        for k in set().union(*settings) - {"seed", *SUMMARY_KEYS}:
             if len({json.dumps(st.get(k), sort_keys=True) for st in settings}) > 1:
                 keys.add(k)
     return sorted(keys)
@@ -360,7 +364,7 @@ def summarize_rows(rows: list[dict[str, Any]],
                    grid: Iterable[str] = ()) -> list[dict[str, str]]:
     """Mean ± sd over seeds per (case, backend, object, hand, true hand, particles) and per
     value of each `grid` setting (`varying_settings`)."""
-    key_names = ("case", "backend", "object", "hand", "true_hand", "particles", *grid)
+    key_names = (*SUMMARY_KEYS, *grid)
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for r in rows:
         groups.setdefault(tuple(r.get(k) for k in key_names), []).append(r)

@@ -33,6 +33,8 @@ def main() -> None:
     ap.add_argument("--at", type=int, nargs="+", default=[15, 20, 30, 40],
                     help="action counts (default 15 20 30 40)")
     args = ap.parse_args()
+    if not (args.out / "trials").is_dir():
+        ap.error(f"{str(args.out)!r} has no trials/ folder: not a sweep's output folder")
     groups: dict[tuple[str, str], dict[int, list[float]]] = {}
     for case, seed, spec, errs in paths(args.out):
         row = [errs[n] if n < len(errs) else float("nan") for n in args.at]

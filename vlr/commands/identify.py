@@ -69,6 +69,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with rolling contacts: after each action return the contacts' "
                    "stretch onto the friction cone MU N and settle again (a cheap stand-in "
                    "for --slide-friction; default off; the sim's pads have 1.0)")
+    p.add_argument("--jitter-h", type=float, default=None, metavar="H",
+                   help="the filter's Liu-West bandwidth, in [0, 1) (default 0.4; "
+                   "RESULTS.md section 5: narrower converges, confidently wrong)")
     p.add_argument("--link-scaling", action="store_true",
                    help="a link of unknown length weighs as the nominal link scaled to its "
                    "length (default: the nominal weights)")
@@ -148,7 +151,7 @@ def run(args: argparse.Namespace) -> int:
         spin_friction=args.spin_friction, exploration=args.exploration,
         active_model_error=args.active_model_error, anneal_stages=args.anneal_stages,
         contact_stiffness=args.contact_stiffness, cone_return=args.cone_return,
-        link_scaling=args.link_scaling)
+        link_scaling=args.link_scaling, jitter_h=args.jitter_h)
     bar = None
 
     def progress(rec) -> None:
