@@ -28,7 +28,36 @@ import numpy as np
 from vlr.controller import ControllerConfig, JacobianController, numerical_jacobian
 from vlr.controller import observed_motion as _motion
 
-__all__ = ["VLRBaseline"]
+__all__ = ["VLRBaseline", "move_pairs", "fitted_jacobian"]
+
+
+def move_pairs(moves) -> tuple[np.ndarray, np.ndarray]:
+    """The tendon changes (K, 3) [m] and the POM motions the camera saw for them (K, 6)
+    [m, rad] between consecutive `moves` (the env's record), skipping unobserved and null
+    moves."""
+    d, m = [], []
+    for a, b in zip(moves[:-1], moves[1:], strict=True):
+        du = b.commands - a.commands
+        if a.observation is None or b.observation is None or np.max(np.abs(du)) < 1e-7:
+            continue
+        d.append(du)
+        m.append(_motion(a.observation, b.observation))
+    return np.reshape(d, (-1, 3)), np.reshape(m, (-1, 6))
+
+
+def fitted_jacobian(env: Any, config: ControllerConfig) -> np.ndarray:
+    """The Jacobian the baseline starts an identified grasp with: the VLR's (Eq. 10, on the
+    env's filter at its commands) plus, with `secant`, the correction fitted to the camera's
+    view of the moves so far (`JacobianController.fit`)."""
+    env = env.unwrapped
+    try:
+        jac = numerical_jacobian(env.pf.motion, env.pf.state, env.commands,
+                                 config.jacobian_eps, config.jacobian_particles)
+    except FloatingPointError:  # no particle solves here: the camera's fit alone
+        jac = np.zeros((6, 3))
+    ctrl = JacobianController(config)
+    ctrl.fit(*move_pairs(env.moves), jac)
+    return ctrl.jacobian
 
 
 class VLRBaseline:
@@ -57,21 +86,10 @@ class VLRBaseline:
                                      self.config.jacobian_eps, self.config.jacobian_particles)
         except FloatingPointError:  # no particle solves here: the camera's fit alone
             jac = np.zeros((6, 3))
-        deltas, motions = self._pairs(env.moves)
+        deltas, motions = move_pairs(env.moves)
         self.controller.fit(deltas, motions, jac)
         self._seen = len(env.moves)
         self._episode = env.identified
-
-    @staticmethod
-    def _pairs(moves) -> tuple[np.ndarray, np.ndarray]:
-        d, m = [], []
-        for a, b in zip(moves[:-1], moves[1:], strict=True):
-            du = b.commands - a.commands
-            if a.observation is None or b.observation is None or np.max(np.abs(du)) < 1e-7:
-                continue
-            d.append(du)
-            m.append(_motion(a.observation, b.observation))
-        return np.reshape(d, (-1, 3)), np.reshape(m, (-1, 6))
 
     def __call__(self, observation: Any = None) -> np.ndarray:
         env = self.env
@@ -80,7 +98,7 @@ class VLRBaseline:
         else:
             # Learn from the moves made since the last call (the camera's view of them).
             new = env.moves[max(self._seen - 1, 0):]
-            for du, dm in zip(*self._pairs(new), strict=True):
+            for du, dm in zip(*move_pairs(new), strict=True):
                 self.controller.learn(du, dm)
             self._seen = len(env.moves)
         pos, rot = env.target

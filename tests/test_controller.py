@@ -16,6 +16,7 @@ from vlr.controller import (
     observed_motion,
     pose_error,
     reach,
+    reachable_motion,
     rotation_log,
     row_weights,
     transpose_step,
@@ -101,6 +102,25 @@ def test_step_holds_a_tendon_at_its_bound_and_solves_for_the_others():
     left = np.linalg.norm(err[:3] - jac[:3] @ du)
     assert left < np.linalg.norm(err[:3] - jac[:3] @ clipped) - 1e-6
     np.testing.assert_allclose(du[2], 0.1e-3, rtol=1e-6)
+
+
+def test_reachable_motion_levels_by_rotation_rows_and_predicts_the_position_it_costs():
+    """The orientation rows fix the tendon change; the position it brings along is read off
+    the same Jacobian. A band that binds holds its tendon at the limit."""
+    rng = np.random.default_rng(3)
+    jac = rng.normal(size=(6, 3)) * np.array([5.0] * 3 + [80.0] * 3)[:, None]  # m/m, rad/m
+    du_true = np.array([0.3e-3, -0.1e-3, 0.2e-3])
+    err = jac @ du_true
+    wide = (np.full(3, -1e-3), np.full(3, 1e-3))
+    du, motion = reachable_motion(jac, err, "orientation", wide)
+    np.testing.assert_allclose(du, du_true, atol=1e-9)
+    np.testing.assert_allclose(motion[:3], err[:3], atol=1e-9)
+    tight = (np.full(3, -1e-3), np.array([0.1e-3, 1e-3, 1e-3]))
+    du, motion = reachable_motion(jac, err, "orientation", tight)
+    assert du[0] == pytest.approx(0.1e-3)
+    np.testing.assert_allclose(motion, jac @ du)
+    with pytest.raises(ValueError, match="must hold zero"):
+        reachable_motion(jac, err, "orientation", (np.full(3, 1e-4), np.full(3, 1e-3)))
 
 
 def test_a_tendon_that_reverses_takes_smaller_steps_until_it_keeps_its_sign():

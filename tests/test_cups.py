@@ -70,6 +70,11 @@ def test_task_cups_writes_result_and_picture(tmp_path):
     assert {"position_mm_mean", "rotation_deg_mean"} <= e.keys()
     assert np.isfinite(e["position_mm_mean"]) and np.isfinite(e["rotation_deg_mean"])
     assert result["cups_stacked"] in (0, 1) and len(e["per_cup"]) == 1
+    # The default target puts the level cup where the identified grasp predicts it, not
+    # where the tag was: the true start error is that planned shift (to the camera's error).
+    cup = e["per_cup"][0]
+    assert cup["target_shift_mm"] > 0.1
+    assert abs(cup["before_correction"]["position_mm"] - cup["target_shift_mm"]) < 0.2
 
 
 @pytest.mark.parametrize("tilt_deg, offset_mm, nests", [(0.0, 0.0, True), (8.0, 3.0, True),

@@ -42,6 +42,7 @@ __all__ = [
     "observed_motion",
     "row_weights",
     "numerical_jacobian",
+    "reachable_motion",
     "transpose_step",
     "dls_step",
     "JacobianController",
@@ -406,6 +407,31 @@ class JacobianController:
             # by): keep the last Jacobian; the camera still closes the loop.
         return self.step(self.jacobian, self.error(observation, target_position,
                                                    target_rotation), bounds)
+
+
+def reachable_motion(jacobian: np.ndarray, error: np.ndarray, rows: str,
+                     bounds: tuple[np.ndarray, np.ndarray],
+                     alpha: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """The tendon change (N,) [m] within `bounds` (low, high) that best achieves the kept
+    `rows` of `error` (6,) [m, rad] by the linear model J (6xN, Eq. 10), weighted as Eq. 12,
+    and the whole POM motion J du (6,) it predicts. Three tendons cannot choose all six
+    dimensions: a task that fixes some of them (the cups' level orientation) reads the rest
+    of the pose the grasp will take from this. A bounded least-squares problem
+    (scipy.optimize.lsq_linear), in millimetres of tendon for conditioning."""
+    from scipy.optimize import lsq_linear
+
+    keep = list(ROWS[rows])
+    w = row_weights(rows, alpha)
+    jw = w[:, None] * np.asarray(jacobian, dtype=float)[keep] * _MM
+    ew = w * np.asarray(error, dtype=float)[keep]
+    lo = np.asarray(bounds[0], dtype=float) / _MM
+    hi = np.asarray(bounds[1], dtype=float) / _MM
+    if np.any(lo > 0) or np.any(hi < 0):
+        raise ValueError(f"bounds {lo} .. {hi} mm must hold zero")
+    # lsq_linear wants low < high: a tendon pinned at zero gets a sliver of room.
+    hi = np.maximum(hi, lo + 1e-12)
+    du = lsq_linear(jw, ew, bounds=(lo, hi)).x * _MM
+    return du, np.asarray(jacobian, dtype=float) @ du
 
 
 # --------------------------------------------------------------------------- the loop
