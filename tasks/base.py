@@ -76,6 +76,11 @@ class HandTaskEnv(gym.Env):
         rolling: the filter's motion model with rolling contacts (`vlr.surface`), and with
             it the backend's likelihood scales for rolling (`vlr.trial.ROLLING_SIGMA`), as
             `vlr identify` has by default; False: pinned contacts at 0.5 mm / 1 degree.
+        nominal_theta_deg: the user's guess of the grasp's joint angles [deg], (proximal,
+            distal) for every finger alike or per finger in the hand's order, as `vlr
+            identify --nominal-theta-deg`; None: the generic guess
+            (`vlr.synthetic.SyntheticConfig.grasp_theta`, -17 and 69 degrees).
+        prior_spread_deg: prior std of the joint angles about the nominal grasp [deg].
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
@@ -88,7 +93,9 @@ class HandTaskEnv(gym.Env):
                  command_band: tuple[float, float] = (0.25e-3, 0.4e-3),
                  squeeze: float = 0.0,
                  include_image: bool = False, image_size: tuple[int, int] = (120, 160),
-                 hardware_config: str | None = None, rolling: bool = False) -> None:
+                 hardware_config: str | None = None, rolling: bool = False,
+                 nominal_theta_deg: tuple[float, ...] | None = None,
+                 prior_spread_deg: float = 3.0) -> None:
         if backend not in ("sim", "hardware"):
             raise ValueError(f"backend {backend!r}: use 'sim' or 'hardware'")
         if backend == "hardware" and not hardware_config:
@@ -112,6 +119,20 @@ class HandTaskEnv(gym.Env):
         if not isinstance(rolling, bool):
             raise ValueError(f"rolling {rolling!r} must be True or False")
         self.rolling = rolling
+        if nominal_theta_deg is not None:
+            try:
+                nominal_theta_deg = tuple(float(v) for v in nominal_theta_deg)
+            except (TypeError, ValueError):
+                raise ValueError(f"nominal_theta_deg {nominal_theta_deg!r}: give joint "
+                                 "angles [deg]") from None
+            if len(nominal_theta_deg) not in (2, 2 * TENDONS) or not all(
+                    np.isfinite(nominal_theta_deg)):
+                raise ValueError(f"nominal_theta_deg {nominal_theta_deg!r}: give 2 finite "
+                                 f"angles (every finger alike) or {2 * TENDONS}")
+        self.nominal_theta_deg = nominal_theta_deg
+        if not (isinstance(prior_spread_deg, int | float) and 0 < prior_spread_deg <= 45):
+            raise ValueError(f"prior_spread_deg {prior_spread_deg!r} must be in (0, 45]")
+        self.prior_spread_deg = float(prior_spread_deg)
         self.action_space = spaces.Box(-self.max_step, self.max_step, shape=(TENDONS,),
                                        dtype=np.float64)
         # Poses: position within 1 m of the palm [m], rotation vector (norm <= pi) [rad].
@@ -247,12 +268,15 @@ class HandTaskEnv(gym.Env):
                              min_iterations=self.identify_iterations,
                              filter=FilterConfig(
                                  n_particles=self.particles, seed=filter_seed, motion=motion,
+                                 theta_spread=float(np.radians(self.prior_spread_deg)),
                                  observation=ObservationModel(sigma_pos=sp * 1e-3,
                                                               sigma_rot=float(np.radians(sr)))))
+        guess = (SyntheticConfig(motion=motion) if self.nominal_theta_deg is None else
+                 SyntheticConfig(grasp_theta=tuple(np.radians(self.nominal_theta_deg)),
+                                 motion=motion))
         try:
             self.identification = identify(self.hand, observer, model, obj,
-                                           nominal_grasp(model, obj,
-                                                         SyntheticConfig(motion=motion)),
+                                           nominal_grasp(model, obj, guess),
                                            cfg, watch=lambda pf, rec: box.update(pf=pf))
         except FloatingPointError:
             # Every particle's solve failed (too few particles, or a prior that misses the

@@ -121,6 +121,9 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
            (["maze", "--option", "command_band=(-0.001,0.001)"], "command_band"),
            (["maze", "--option", "command_band=((0.001,0.001),0.001)"], "command_band"),
            (["handwriting", "--option", "rolling=1"], "rolling"),
+           (["handwriting", "--option", "nominal_theta_deg=(1,2,3)"], "nominal_theta_deg"),
+           (["maze", "--option", "nominal_theta_deg='x'"], "nominal_theta_deg"),
+           (["cups", "--option", "prior_spread_deg=0"], "prior_spread_deg"),
            (["cups", "--alpha", "0"], "--alpha"),
            (["cups", "--option", "level_about=rim"], "level_about"),
            (["cups", "--alpha", "nan"], "--alpha"),
@@ -153,6 +156,26 @@ def test_rolling_reaches_the_tasks_filter_with_its_likelihood():
             assert env.pf.obs_model.sigma_rot == pytest.approx(np.radians(sigma[1]))
         finally:
             env.close()
+
+
+def test_the_users_grasp_guess_centres_the_tasks_prior():
+    """`nominal_theta_deg` and `prior_spread_deg` reach the identification in reset: the
+    prior is drawn about the nominal hand's equilibrium from that guess, with that spread."""
+    from tasks.handwriting import HandwritingEnv
+
+    distal = {}
+    for guess, spread in (((-10.0, 15.0), 10.0), (None, 3.0)):
+        env = HandwritingEnv(word="I", nominal_theta_deg=guess, prior_spread_deg=spread,
+                             **{**QUICK, "identify_iterations": 0})
+        try:
+            env.reset(seed=0)
+            assert env.pf.config.theta_spread == pytest.approx(np.radians(spread))
+            distal[guess] = np.degrees(env.pf.state.theta[:, :, 1].mean())
+        finally:
+            env.close()
+    # The generic guess (-17, 69 degrees) settles on the apple with the distal joints about
+    # 15 degrees more flexed than the user's guess does (5 against 20 at seed 0).
+    assert distal[None] - distal[(-10.0, 15.0)] > 8.0
 
 
 def test_a_command_band_may_give_each_tendon_its_own_limits():

@@ -8,9 +8,12 @@ defaults with the VLR baseline; the camera's view only, as the policy sees it.
 
     MUJOCO_GL=egl python docs/scripts/cups_plan_trace.py --seed 0
     MUJOCO_GL=egl python docs/scripts/cups_plan_trace.py --seed 0 --level-about tag
+    MUJOCO_GL=egl python docs/scripts/cups_plan_trace.py --seed 1 \
+        --option "nominal_theta_deg=(-10,15)" --option prior_spread_deg=10
 """
 
 import argparse
+import ast
 
 import gymnasium as gym
 import numpy as np
@@ -24,9 +27,12 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--level-about", default="plan", choices=("plan", "tag", "grip"))
+    ap.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                    help="an env option, as `vlr task --option`")
     args = ap.parse_args()
+    options = {k: ast.literal_eval(v) for k, v in (o.split("=", 1) for o in args.option)}
     np.set_printoptions(precision=3, suppress=True)
-    env = gym.make(tasks.CUP_STACKING, n_cups=1, level_about=args.level_about)
+    env = gym.make(tasks.CUP_STACKING, n_cups=1, level_about=args.level_about, **options)
     u = env.unwrapped
     obs, info = env.reset(seed=args.seed)
     jac = fitted_jacobian(u, u.controller_config)
