@@ -18,6 +18,7 @@ entry-point group (pyproject.toml), as backends do: `vlr` never imports `tasks`,
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import math
 import os
 import time
@@ -59,6 +60,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--alpha", type=float, default=None,
                    help="Eq. 12's rotation weight (mm per degree) on the full rows "
                    "(default: the task's; cups 9.5, the paper's)")
+    p.add_argument("--jacobian-particles", type=int, default=None, metavar="N",
+                   help="posterior particles the VLR's Jacobian (Eq. 10) is averaged over "
+                   "(vlr.controller.ControllerConfig.jacobian_particles; default: the task's)")
+    p.add_argument("--controller", action="append", default=[], metavar="KEY=VALUE",
+                   help="a field of the baseline's controller config "
+                   "(vlr.controller.ControllerConfig), e.g. secant_updates=True")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="an environment argument, e.g. word=SCI or letter_height=0.002")
     p.add_argument("--out", default=None, help="output folder (default runs/task-NAME)")
@@ -66,14 +73,14 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _parse_options(items: list[str]) -> dict:
+def _parse_options(items: list[str], flag: str = "--option") -> dict:
     import ast
 
     out = {}
     for item in items:
         key, sep, value = item.partition("=")
         if not sep or not key:
-            raise UserError(f"--option {item!r}: expected KEY=VALUE")
+            raise UserError(f"{flag} {item!r}: expected KEY=VALUE")
         try:
             out[key] = ast.literal_eval(value)
         except (ValueError, SyntaxError):
@@ -164,6 +171,26 @@ def _checked(args: argparse.Namespace) -> tuple[str, str, dict, dict, dict]:
         if not (math.isfinite(args.alpha) and args.alpha > 0):
             raise UserError(f"--alpha {args.alpha} must be a positive number")
         changes["alpha"] = args.alpha
+    if args.controller:
+        from dataclasses import fields, replace
+
+        from vlr.controller import ControllerConfig
+
+        known = {f.name for f in fields(ControllerConfig)}
+        extra = _parse_options(args.controller, "--controller")
+        for key in extra:
+            if key not in known:
+                raise UserError(f"--controller {key!r}: not a controller setting (one of "
+                                f"{', '.join(sorted(known))})")
+        try:   # checks the values: the task's config with these changes must build
+            replace(ControllerConfig(), **extra)
+        except (TypeError, ValueError) as exc:
+            raise UserError(f"--controller: {exc}") from None
+        changes.update(extra)
+    if args.jacobian_particles is not None:
+        if args.jacobian_particles < 1:
+            raise UserError(f"--jacobian-particles {args.jacobian_particles} must be >= 1")
+        changes["jacobian_particles"] = args.jacobian_particles
     return args.name, env_id, kwargs, changes, options
 
 
@@ -217,10 +244,7 @@ def run_seed(job: SeedRun) -> dict:
         result = {"task": job.name, "env": job.env_id, "backend": job.kwargs["backend"],
                   "seed": job.seed, "particles": job.kwargs["particles"],
                   "options": job.options,
-                  "controller": {"method": policy.config.method,
-                                 "rows": policy.config.rows, "alpha": policy.config.alpha,
-                                 "secant": policy.config.secant,
-                                 "reversal_shrink": policy.config.reversal_shrink},
+                  "controller": dataclasses.asdict(policy.config),
                   **task.metrics(),
                   "identification": _identification(task.identification),
                   "steps": steps,
