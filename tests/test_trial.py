@@ -107,6 +107,24 @@ def test_rolling_contacts_by_default_on_the_sim_and_pinned_on_the_synthetic_worl
         TrialSettings(rolling="yes")
 
 
+def test_the_grasp_guess_follows_the_backend_and_an_explicit_one_wins():
+    """The sim's default guess is the one its identification rows use (-10, 15) +- 10
+    degrees (the generic guess identified the sim apple 12 degrees off); the synthetic world
+    grasps at the generic guess and keeps it, as the real hand does until measured."""
+    assert TrialSettings(backend="sim").grasp_guess == ((-10.0, 15.0), 10.0)
+    assert TrialSettings(backend="synthetic").grasp_guess == (None, 3.0)
+    assert TrialSettings(backend="hardware", config="x.yaml").grasp_guess == (None, 3.0)
+    assert TrialSettings(backend="sim", nominal_theta_deg=(-5, 20),
+                         prior_spread_deg=4.0).grasp_guess == ((-5.0, 20.0), 4.0)
+    assert TrialSettings(backend="synthetic", prior_spread_deg=7.0).grasp_guess == (None, 7.0)
+    with pytest.raises(UserError, match="prior_spread_deg -1"):
+        TrialSettings(prior_spread_deg=-1)
+    # the synthetic world's prior is drawn about the generic guess with a 3-degree spread
+    world = open_world(TrialSettings(backend="synthetic"))
+    generic = open_world(TrialSettings(backend="synthetic", nominal_theta_deg=(-17.19, 68.75)))
+    assert abs(world.nominal.theta - generic.nominal.theta).max() < 1e-3
+
+
 def test_likelihood_scales_follow_the_backend_and_the_contact_model():
     # The sim's rolling filter takes the narrower ROLLING_SIGMA; pinned and the real hand keep
     # DEFAULT_SIGMA; explicit scales win.

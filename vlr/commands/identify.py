@@ -44,9 +44,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "motion over the action (0: fixed scales)")
     p.add_argument("--nominal-theta-deg", type=float, nargs="+", metavar="DEG",
                    help="your guess of the grasp's joint angles: one per joint (every finger "
-                   "alike), or one per joint of every finger in the hand's order")
-    p.add_argument("--prior-spread-deg", type=float, default=3.0,
-                   help="prior std of the joint angles about the nominal grasp [deg]")
+                   "alike), or one per joint of every finger in the hand's order (default: "
+                   "the backend's, vlr.trial.GUESS_DEFAULT: -10 15 on the sim)")
+    p.add_argument("--prior-spread-deg", type=float, default=None,
+                   help="prior std of the joint angles about the nominal grasp [deg] "
+                   "(default: the backend's: 10 on the sim, 3 otherwise)")
     p.add_argument("--rolling", action=argparse.BooleanOptionalAction, default=None,
                    help="rolling contacts in the filter's motion model, or pinned ones with "
                    "--no-rolling (default: the backend's, vlr.trial.ROLLING_DEFAULT: rolling on "
