@@ -28,7 +28,7 @@ import numpy as np
 from vlr.controller import ControllerConfig, JacobianController, numerical_jacobian
 from vlr.controller import observed_motion as _motion
 
-__all__ = ["VLRBaseline", "move_pairs", "fitted_jacobian"]
+__all__ = ["VLRBaseline", "move_pairs", "fitted_controller", "fitted_jacobian"]
 
 
 def move_pairs(moves) -> tuple[np.ndarray, np.ndarray]:
@@ -45,10 +45,10 @@ def move_pairs(moves) -> tuple[np.ndarray, np.ndarray]:
     return np.reshape(d, (-1, 3)), np.reshape(m, (-1, 6))
 
 
-def fitted_jacobian(env: Any, config: ControllerConfig) -> np.ndarray:
-    """The Jacobian the baseline starts an identified grasp with: the VLR's (Eq. 10, on the
-    env's filter at its commands) plus, with `secant`, the correction fitted to the camera's
-    view of the moves so far (`JacobianController.fit`)."""
+def fitted_controller(env: Any, config: ControllerConfig) -> JacobianController:
+    """A controller for a freshly identified grasp: the VLR's Jacobian (Eq. 10, on the env's
+    filter at its commands) plus, with `secant`, the correction fitted to the camera's view
+    of the moves so far (`JacobianController.fit`)."""
     env = env.unwrapped
     try:
         jac = numerical_jacobian(env.pf.motion, env.pf.state, env.commands,
@@ -57,7 +57,12 @@ def fitted_jacobian(env: Any, config: ControllerConfig) -> np.ndarray:
         jac = np.zeros((6, 3))
     ctrl = JacobianController(config)
     ctrl.fit(*move_pairs(env.moves), jac)
-    return ctrl.jacobian
+    return ctrl
+
+
+def fitted_jacobian(env: Any, config: ControllerConfig) -> np.ndarray:
+    """The Jacobian the baseline starts an identified grasp with (`fitted_controller`)."""
+    return fitted_controller(env, config).jacobian
 
 
 class VLRBaseline:
@@ -80,14 +85,7 @@ class VLRBaseline:
 
     def _new_episode(self) -> None:
         env = self.env
-        self.controller = JacobianController(self.config)
-        try:
-            jac = numerical_jacobian(env.pf.motion, env.pf.state, env.commands,
-                                     self.config.jacobian_eps, self.config.jacobian_particles)
-        except FloatingPointError:  # no particle solves here: the camera's fit alone
-            jac = np.zeros((6, 3))
-        deltas, motions = move_pairs(env.moves)
-        self.controller.fit(deltas, motions, jac)
+        self.controller = fitted_controller(env, self.config)
         self._seen = len(env.moves)
         self._episode = env.identified
 

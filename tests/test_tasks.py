@@ -134,6 +134,8 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
            (["cups", "--controller", "gain"], "KEY=VALUE"),
            (["cups", "--controller", "speed=1"], "not a controller setting"),
            (["cups", "--controller", "rows='diagonal'"], "rows"),
+           (["cups", "--controller", "secant_updates=yes"], "expected a bool"),
+           (["cups", "--controller", "gain=0"], "gain"),
            (["handwriting", "--option", "colour=1"], "colour"),
            (["handwriting", "--seeds", "0-x"], "seeds"),
            (["handwriting", "--seeds", "1,1"], "twice"),

@@ -8,8 +8,10 @@ defaults with the VLR baseline; the camera's view only, as the policy sees it.
 
     MUJOCO_GL=egl python docs/scripts/cups_plan_trace.py --seed 0
     MUJOCO_GL=egl python docs/scripts/cups_plan_trace.py --seed 0 --level-about tag
-    MUJOCO_GL=egl python docs/scripts/cups_plan_trace.py --seed 1 \
-        --option "nominal_theta_deg=(-10,15)" --option prior_spread_deg=10
+    # the defaults before session 12's grasp guess and per-move updates:
+    MUJOCO_GL=egl python docs/scripts/cups_plan_trace.py --seed 0 \
+        --option nominal_theta_deg=None --option prior_spread_deg=3 \
+        --controller secant_updates=False
 """
 
 import argparse
@@ -29,8 +31,11 @@ def main() -> None:
     ap.add_argument("--level-about", default="plan", choices=("plan", "tag", "grip"))
     ap.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                     help="an env option, as `vlr task --option`")
+    ap.add_argument("--controller", action="append", default=[], metavar="KEY=VALUE",
+                    help="a controller setting of the baseline, as `vlr task --controller`")
     args = ap.parse_args()
     options = {k: ast.literal_eval(v) for k, v in (o.split("=", 1) for o in args.option)}
+    changes = {k: ast.literal_eval(v) for k, v in (o.split("=", 1) for o in args.controller)}
     np.set_printoptions(precision=3, suppress=True)
     env = gym.make(tasks.CUP_STACKING, n_cups=1, level_about=args.level_about, **options)
     u = env.unwrapped
@@ -40,7 +45,7 @@ def main() -> None:
     print("Jacobian, rotation rows [deg per mm of tendon]:\n", np.degrees(jac[3:]) * 1e-3)
     goal_pos, goal_rot = u.goal
     print("target shift [mm]", (goal_pos - np.asarray(u.observation.position)) * 1e3)
-    policy = u.baseline()
+    policy = u.baseline(**changes)
     start = u.commands.copy()
     print("action [mm] | error: position [mm], rotation [deg] | tag moved [mm] | "
           "predicted [mm]")

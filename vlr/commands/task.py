@@ -155,7 +155,9 @@ def _checked(args: argparse.Namespace) -> tuple[str, str, dict, dict, dict]:
     if args.config:
         kwargs["hardware_config"] = args.config
     try:   # checks the arguments; the backend opens in reset
-        gym.make(env_id, **kwargs).close()
+        env = gym.make(env_id, **kwargs)
+        task_config = env.unwrapped.controller_config
+        env.close()
     except (TypeError, ValueError) as exc:   # an unknown or bad environment argument
         raise UserError(f"--option: {exc}") from None
     changes = {}
@@ -171,26 +173,30 @@ def _checked(args: argparse.Namespace) -> tuple[str, str, dict, dict, dict]:
         if not (math.isfinite(args.alpha) and args.alpha > 0):
             raise UserError(f"--alpha {args.alpha} must be a positive number")
         changes["alpha"] = args.alpha
-    if args.controller:
-        from dataclasses import fields, replace
-
-        from vlr.controller import ControllerConfig
-
-        known = {f.name for f in fields(ControllerConfig)}
-        extra = _parse_options(args.controller, "--controller")
-        for key in extra:
-            if key not in known:
-                raise UserError(f"--controller {key!r}: not a controller setting (one of "
-                                f"{', '.join(sorted(known))})")
-        try:   # checks the values: the task's config with these changes must build
-            replace(ControllerConfig(), **extra)
-        except (TypeError, ValueError) as exc:
-            raise UserError(f"--controller: {exc}") from None
-        changes.update(extra)
     if args.jacobian_particles is not None:
         if args.jacobian_particles < 1:
             raise UserError(f"--jacobian-particles {args.jacobian_particles} must be >= 1")
         changes["jacobian_particles"] = args.jacobian_particles
+    if args.controller:
+        known = {f.name for f in dataclasses.fields(task_config)}
+        for key, value in _parse_options(args.controller, "--controller").items():
+            if key not in known:
+                raise UserError(f"--controller {key!r}: not a controller setting (one of "
+                                f"{', '.join(sorted(known))})")
+            # A value of another type than the task's (secant_updates=yes, a string) would
+            # be taken as it is, and a string is true.
+            now = getattr(task_config, key)
+            ok = (isinstance(value, bool) if isinstance(now, bool) else
+                  isinstance(value, int | float) and not isinstance(value, bool)
+                  if isinstance(now, int | float) else isinstance(value, type(now)))
+            if not ok:
+                raise UserError(f"--controller {key}={value!r}: expected a "
+                                f"{type(now).__name__}, like the task's {now!r}")
+            changes[key] = value
+    try:   # the task's controller with every change must build
+        dataclasses.replace(task_config, **changes)
+    except (TypeError, ValueError) as exc:
+        raise UserError(f"controller settings: {exc}") from None
     return args.name, env_id, kwargs, changes, options
 
 
