@@ -67,6 +67,9 @@ def test_motion_scaled_model_error_runs_a_trial_and_refuses_a_negative_fraction(
     assert summary["settings"]["sigma_motion"] == 0.1 and summary["iterations"] == 2
     assert summary["rolling"] is False    # the synthetic world's default, as it was run
     assert summary["sigma"] == [0.1, 0.4]
+    # the guess in effect, where the settings say None (the synthetic world's generic one)
+    assert summary["settings"]["nominal_theta_deg"] is None
+    assert summary["grasp_guess"] == {"nominal_theta_deg": None, "prior_spread_deg": 3.0}
     with pytest.raises(UserError, match="sigma_motion -1"):
         TrialSettings(sigma_motion=-1.0)
     with pytest.raises(UserError, match="sigma_motion 'big'"):

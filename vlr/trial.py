@@ -503,6 +503,9 @@ def identify_trial(settings: TrialSettings, progress: Callable | None = None,
     summary["settings"] = settings.to_dict()
     summary["rolling"] = settings.uses_rolling   # in effect (`rolling` None: the backend's)
     summary["sigma"] = list(settings.sigma)       # in effect, [mm, deg]
+    guess, spread = settings.grasp_guess          # in effect (None: the backend's default)
+    summary["grasp_guess"] = {"nominal_theta_deg": None if guess is None else list(guess),
+                              "prior_spread_deg": float(spread)}
     if hasattr(w.world, "regrasps"):  # synthetic: truths drawn again for sitting at a fold
         summary["world_regrasps"] = int(w.world.regrasps)
     return TrialRun(summary, result, w.model, truths)
