@@ -123,6 +123,21 @@ def test_reachable_motion_levels_by_rotation_rows_and_predicts_the_position_it_c
         reachable_motion(jac, err, "orientation", (np.full(3, 1e-4), np.full(3, 1e-3)))
 
 
+def test_rows_without_yaw_ignore_a_yaw_error_that_full_rows_chase():
+    """A cup is symmetric about the palm normal: with "full_no_yaw" a yaw error alone asks
+    for no tendon change and does not keep `done` from holding, where "full" moves the
+    tendons for it (0.05 mm for half a degree here, a step that turns the cup's tilt too)."""
+    jac = np.array([[2.0, -1.0, 1.0], [1.0, -3.0, -3.0], [-1.5, -1.0, -0.6],
+                    [45.0, 12.0, 3.0], [6.0, -41.0, 54.0], [-0.3, 1.7, -1.2]])  # m/m, rad/m
+    yaw = np.array([0.0, 0.0, 0.0, 0.0, 0.0, np.radians(0.5)])
+    full = JacobianController(ControllerConfig(rows="full", alpha=9.5))
+    no_yaw = JacobianController(ControllerConfig(rows="full_no_yaw", alpha=9.5))
+    assert np.max(np.abs(full.step(jac, yaw))) > 0.04e-3
+    np.testing.assert_allclose(no_yaw.step(jac, yaw), 0.0, atol=1e-15)
+    assert no_yaw.done(yaw) and not full.done(yaw)
+    assert row_weights("full_no_yaw", 9.5).shape == (5,) and row_weights("tilt").shape == (2,)
+
+
 def test_a_tendon_that_reverses_takes_smaller_steps_until_it_keeps_its_sign():
     """A step that overshoots chatters: a 1-D plant that moves twice what the Jacobian says
     (a slip the VLR underestimates) flips the error's sign every step at gain 1, for ever.

@@ -13,6 +13,8 @@ budget is spent (`reach`).
 Sub-dimensions (METHOD.md 5): rows are truncated to position (handwriting) or orientation
 (maze), or all six are kept with the weighted error of Eq. 12,
 Delta phi' = [Delta x, Delta y, Delta z, alpha Delta roll, alpha Delta pitch, alpha Delta yaw].
+Ours: "full_no_yaw" and "tilt" drop the yaw row (about the palm normal) for an object that is
+symmetric about it (a cup held level).
 Units of Eq. 12 are our choice (the paper does not give them): millimetres and degrees, so
 alpha = 9.5 makes one degree weigh as much as 9.5 mm.
 
@@ -56,6 +58,11 @@ ROWS: dict[str, tuple[int, ...]] = {
     "position": (0, 1, 2),
     "orientation": (3, 4, 5),
     "full": (0, 1, 2, 3, 4, 5),
+    # Yaw dropped (rotation about the palm normal): an object symmetric about the axis the
+    # palm faces (a cup held level) does not care about it, and three tendons barely turn
+    # it, so a yaw error asks for large tendon changes that do nothing else (docs/TASKS.md).
+    "full_no_yaw": (0, 1, 2, 3, 4),
+    "tilt": (3, 4),
 }
 _MM = 1e-3                      # Eq. 12 length unit [m] (our choice, module docstring)
 _DEG = float(np.radians(1.0))   # Eq. 12 angle unit [rad]
@@ -66,7 +73,8 @@ class ControllerConfig:
     """Settings of the Jacobian controller (units in brackets).
 
     Attributes:
-        rows: "position" | "orientation" | "full" (the rows of J and Delta phi kept).
+        rows: "position" | "orientation" | "full" | "full_no_yaw" | "tilt" (the rows of J
+            and Delta phi kept, `ROWS`).
         method: "transpose" (Eq. 11) or "dls" (damped least squares).
         alpha: orientation weight of Eq. 12 (9.5 for cup stacking); used with rows "full".
         gain: proportional gain on the step (1 = the full step the linear model asks for).
@@ -326,8 +334,9 @@ class JacobianController:
         ok = True
         if any(r < 3 for r in rows):
             ok &= bool(np.linalg.norm(error[:3]) <= cfg.tolerance_pos)
-        if any(r >= 3 for r in rows):
-            ok &= bool(np.linalg.norm(error[3:]) <= cfg.tolerance_rot)
+        rot = [r for r in rows if r >= 3]
+        if rot:
+            ok &= bool(np.linalg.norm(error[rot]) <= cfg.tolerance_rot)
         return ok
 
     def step(self, jacobian: np.ndarray, error: np.ndarray,
