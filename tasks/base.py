@@ -79,7 +79,10 @@ class HandTaskEnv(gym.Env):
         nominal_theta_deg: the user's guess of the grasp's joint angles [deg], (proximal,
             distal) for every finger alike or per finger in the hand's order, as `vlr
             identify --nominal-theta-deg`; None: the generic guess
-            (`vlr.synthetic.SyntheticConfig.grasp_theta`, -17 and 69 degrees).
+            (`vlr.synthetic.SyntheticConfig.grasp_theta`, -17 and 69 degrees). The default
+            is the guess every sim identification row uses, (-10, 15) (`vlr.trial.
+            GUESS_DEFAULT`): the generic one wraps the distal joints and left handwriting's
+            and the cups' VLR 15-17 degrees off (docs/TASKS.md, "The grasp guess").
         prior_spread_deg: prior std of the joint angles about the nominal grasp [deg].
     """
 
@@ -94,8 +97,8 @@ class HandTaskEnv(gym.Env):
                  squeeze: float = 0.0,
                  include_image: bool = False, image_size: tuple[int, int] = (120, 160),
                  hardware_config: str | None = None, rolling: bool = False,
-                 nominal_theta_deg: tuple[float, ...] | None = None,
-                 prior_spread_deg: float = 3.0) -> None:
+                 nominal_theta_deg: tuple[float, ...] | None = (-10.0, 15.0),
+                 prior_spread_deg: float = 10.0) -> None:
         if backend not in ("sim", "hardware"):
             raise ValueError(f"backend {backend!r}: use 'sim' or 'hardware'")
         if backend == "hardware" and not hardware_config:

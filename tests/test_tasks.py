@@ -7,6 +7,7 @@ defaults of `vlr task` on one letter."""
 
 from __future__ import annotations
 
+import inspect
 import json
 
 import gymnasium as gym
@@ -185,6 +186,12 @@ def test_the_users_grasp_guess_centres_the_tasks_prior():
         finally:
             env.close()
     assert HandwritingEnv().nominal_theta_deg == (-10.0, 15.0)
+    # a new task inherits the user's guess; the maze keeps the generic one it was measured with
+    from tasks.base import HandTaskEnv
+    from tasks.maze import MarbleMazeEnv
+
+    default = inspect.signature(HandTaskEnv).parameters["nominal_theta_deg"].default
+    assert default == (-10.0, 15.0) and MarbleMazeEnv().nominal_theta_deg is None
     # seed 0: 3.3 degrees against 18 (the generic guess wraps the thumb's distal joint)
     assert errors[(-10.0, 15.0)] < 5.0 < 10.0 < errors[None], errors
 
