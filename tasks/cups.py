@@ -98,7 +98,10 @@ class CupStackingEnv(HandTaskEnv):
             5-10 degrees, so the band pulls up to 1.2 mm. Releasing a side tendon by 0.6 mm
             while the other pulls 0.8 mm lost its fingertip (docs/scripts/
             cups_tendon_probe.py), so the sides release 0.25 mm at most; the thumb holds 22 N
-            against the sides' 12 N and releases 0.5 mm (thumb, left, right).
+            against the sides' 12 N and releases 0.7 mm (thumb, left, right): at the band's
+            corner seed 0's cup2 held with 0.8 mm and was lost at 1.0 (`cups_tendon_probe.py
+            --thumb`), and the thumb's release is what levels a cup about x (0.5 mm, the
+            default until session 13: 5.24 degrees at release against 3.91; docs/TASKS.md).
         squeeze: as `HandTaskEnv`'s: 0.3 mm on every tendon before the correction, so
             that one finger's pull does not unload the opposite fingertip (without it, the
             1.2 mm band lost a fingertip on seeds 0 and 1).
@@ -125,7 +128,7 @@ class CupStackingEnv(HandTaskEnv):
                  n_cups: int = 4, tilt_deg: tuple[float, float] = (5.0, 10.0),
                  tolerance_mm: float = 0.3, tolerance_deg: float = 0.3,
                  steps_per_cup: int = 20, clearance: float = 0.002,
-                 command_band: tuple = ((0.5e-3, 0.25e-3, 0.25e-3), 1.2e-3),
+                 command_band: tuple = ((0.7e-3, 0.25e-3, 0.25e-3), 1.2e-3),
                  squeeze: float = 0.3e-3, level_about: str = "plan",
                  nominal_theta_deg: tuple[float, ...] | None = (-10.0, 15.0),
                  prior_spread_deg: float = 10.0, **kwargs: Any) -> None:

@@ -9,7 +9,14 @@ motion the camera sees and whether the grasp held; then steps the commands to a 
 release/pull combinations, printing the true tilt and the static tendon tensions [N].
 
     MUJOCO_GL=egl python docs/scripts/cups_tendon_probe.py
+    MUJOCO_GL=egl python docs/scripts/cups_tendon_probe.py --thumb   # session 13
+
+With `--thumb`: from the task's centre (the 0.3 mm squeeze on), go to the band's corner
+(thumb -0.5, left -0.25, right +1.2 mm) and release the thumb further (0.8, 1.0, 1.3 mm),
+printing the tilt, the tensions and whether the grasp held, until it does not.
 """
+
+import sys
 
 import gymnasium as gym
 import numpy as np
@@ -21,6 +28,23 @@ from vlr.controller import pose_error
 def pose(env):
     o = env.observation
     return np.asarray(o.position).copy(), np.asarray(o.rotation).copy()
+
+
+def thumb() -> None:
+    env = gym.make(tasks.CUP_STACKING, particles=1000, identify_iterations=2, n_cups=1,
+                   command_band=(2e-3, 3e-3)).unwrapped
+    env.reset(seed=0)
+    print(f"start tilt {env._true_error()['tilt_deg']:.2f} deg")
+    for t in (-0.5e-3, -0.8e-3, -1.0e-3, -1.3e-3):
+        goal = env.center + np.array([t, -0.25e-3, 1.2e-3])
+        while np.max(np.abs(goal - env.commands)) > 1e-9 and not env.grasp_lost:
+            env._apply(np.clip(goal - env.commands, -0.4e-3, 0.4e-3))
+        e = env._true_error()
+        print(f"thumb {t * 1e3:+.1f}, left -0.25, right +1.2 mm from the centre: tilt "
+              f"{e['tilt_deg']:.2f} deg, tensions {env.hand.static_tensions().round(1)} N, "
+              f"grasp lost {env.grasp_lost}")
+        if env.grasp_lost:
+            break
 
 
 def main() -> None:
@@ -49,4 +73,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    thumb() if "--thumb" in sys.argv[1:] else main()
