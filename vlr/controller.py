@@ -76,7 +76,8 @@ class ControllerConfig:
         rows: "position" | "orientation" | "full" | "full_no_yaw" | "tilt" (the rows of J
             and Delta phi kept, `ROWS`).
         method: "transpose" (Eq. 11) or "dls" (damped least squares).
-        alpha: orientation weight of Eq. 12 (9.5 for cup stacking); used with rows "full".
+        alpha: orientation weight of Eq. 12 (9.5 for cup stacking); used with the rows that
+            mix position and rotation ("full", "full_no_yaw").
         gain: proportional gain on the step (1 = the full step the linear model asks for).
         damping: lambda of the damped least-squares step, in the units of Eq. 12 (mm, deg
             per mm of tendon); small against the singular values of J.
