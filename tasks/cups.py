@@ -111,9 +111,6 @@ class CupStackingEnv(HandTaskEnv):
             (the identified VLR's contact centroid, over fingers and particles, 45 mm
             above the tag). "tag" and "grip" were measured worse (docs/TASKS.md, "The
             in-hand target").
-        nominal_theta_deg, prior_spread_deg: as `HandTaskEnv`'s; here the user's guess of
-            a cup grasp, (-10, 15) degrees with a 10-degree spread (the generic guess left
-            two tendons slack in the VLR: docs/TASKS.md, "The grasp guess").
     """
 
     object_name = "cup2"
@@ -130,15 +127,13 @@ class CupStackingEnv(HandTaskEnv):
                  steps_per_cup: int = 20, clearance: float = 0.002,
                  command_band: tuple = ((0.7e-3, 0.25e-3, 0.25e-3), 1.2e-3),
                  squeeze: float = 0.3e-3, level_about: str = "plan",
-                 nominal_theta_deg: tuple[float, ...] | None = (-10.0, 15.0),
-                 prior_spread_deg: float = 10.0, **kwargs: Any) -> None:
+                 **kwargs: Any) -> None:
         if backend == "hardware":
             raise UserError("cup stacking needs an arm (a wrist pose command, palm down, "
                             "over the cups): this project has no arm driver, so the task "
                             "runs in the sim only")
         super().__init__(backend, render_mode, command_band=command_band, squeeze=squeeze,
-                         nominal_theta_deg=nominal_theta_deg,
-                         prior_spread_deg=prior_spread_deg, **kwargs)
+                         **kwargs)
         if not isinstance(n_cups, int) or not 1 <= n_cups <= 4:
             raise ValueError(f"n_cups {n_cups!r} must be 1..4")
         lo, hi = (float(v) for v in tilt_deg)

@@ -47,10 +47,6 @@ class HandwritingEnv(HandTaskEnv):
         spacing: largest distance between consecutive waypoints of a letter [m].
         tolerance: the target advances when the camera error is below this [m].
         steps_per_waypoint: ... or after this many moves.
-        nominal_theta_deg, prior_spread_deg: as `HandTaskEnv`'s; here the user's guess of
-            the apple grasp, (-10, 15) degrees with a 10-degree spread, as the
-            identification rows of docs/RESULTS.md have it (the generic guess left two
-            tendons slack in the VLR: docs/TASKS.md, "The grasp guess").
     """
 
     object_name = "apple"
@@ -65,10 +61,8 @@ class HandwritingEnv(HandTaskEnv):
     def __init__(self, backend: str = "sim", render_mode: str | None = None, *,
                  word: str = "SCIENCE", letter_height: float = 2e-3, spacing: float = 1.5e-3,
                  tolerance: float = 0.1e-3, steps_per_waypoint: int = 12,
-                 nominal_theta_deg: tuple[float, ...] | None = (-10.0, 15.0),
-                 prior_spread_deg: float = 10.0, **kwargs: Any) -> None:
-        super().__init__(backend, render_mode, nominal_theta_deg=nominal_theta_deg,
-                         prior_spread_deg=prior_spread_deg, **kwargs)
+                 **kwargs: Any) -> None:
+        super().__init__(backend, render_mode, **kwargs)
         if not isinstance(word, str) or not word:
             raise ValueError(f"word {word!r} must be a non-empty string")
         if letter_height <= 0 or spacing <= 0 or tolerance <= 0 or steps_per_waypoint < 1:

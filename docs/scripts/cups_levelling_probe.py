@@ -9,7 +9,9 @@ view of it is printed beside them.
 A one-off diagnostic, not part of the package. The predictions read the camera and the
 filter only; the last line scores the pose against the target with ground truth.
 
-    MUJOCO_GL=egl python docs/scripts/cups_levelling_probe.py --seed 0 --reach band
+    # as measured in session 13, with the thumb's release then (0.5 mm):
+    MUJOCO_GL=egl python docs/scripts/cups_levelling_probe.py --seed 0 --reach band \
+        --option "command_band=((0.0005,0.00025,0.00025),0.0012)"
 """
 
 import argparse
@@ -20,7 +22,9 @@ import numpy as np
 
 import tasks
 from tasks.baseline import fitted_jacobian
+from vlr.commands.task import _parse_options
 from vlr.controller import (
+    _sample,
     numerical_jacobian,
     observed_motion,
     pose_error,
@@ -35,8 +39,7 @@ def model_motion(pf, u: np.ndarray, du: np.ndarray, n: int = 64,
     `u + du` (in `substeps` for Newton's sake), and how many particles solved."""
     motion = pf.motion
     cfg = replace(motion.config, max_iter=max(motion.config.max_iter, 200))
-    idx = np.flatnonzero(pf.state.valid)
-    st = pf.state.take(idx[np.linspace(0, idx.size - 1, min(n, idx.size)).astype(int)])
+    st = _sample(pf.state, n)
     motion.solve(st, u, cfg)
     p0, r0 = st.pos.copy(), st.rot.copy()
     for k in range(1, substeps + 1):
@@ -56,9 +59,11 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--reach", choices=("move", "band"), default="move",
                     help="plan within one move's bounds (the env's) or the whole band")
+    ap.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
+                    help="an env option, as `vlr task --option`")
     args = ap.parse_args()
     np.set_printoptions(precision=2, suppress=True)
-    env = gym.make(tasks.CUP_STACKING, n_cups=1).unwrapped
+    env = gym.make(tasks.CUP_STACKING, n_cups=1, **_parse_options(args.option)).unwrapped
     env.reset(seed=args.seed)
     cfg = env.controller_config
     pos, rot = np.asarray(env.observation.position), np.asarray(env.observation.rotation)

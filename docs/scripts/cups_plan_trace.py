@@ -15,13 +15,13 @@ defaults with the VLR baseline; the camera's view only, as the policy sees it.
 """
 
 import argparse
-import ast
 
 import gymnasium as gym
 import numpy as np
 
 import tasks
 from tasks.baseline import fitted_jacobian
+from vlr.commands.task import _parse_options
 from vlr.controller import observed_motion, pose_error
 
 
@@ -34,8 +34,8 @@ def main() -> None:
     ap.add_argument("--controller", action="append", default=[], metavar="KEY=VALUE",
                     help="a controller setting of the baseline, as `vlr task --controller`")
     args = ap.parse_args()
-    options = {k: ast.literal_eval(v) for k, v in (o.split("=", 1) for o in args.option)}
-    changes = {k: ast.literal_eval(v) for k, v in (o.split("=", 1) for o in args.controller)}
+    options = _parse_options(args.option)
+    changes = _parse_options(args.controller, "--controller")
     np.set_printoptions(precision=3, suppress=True)
     env = gym.make(tasks.CUP_STACKING, n_cups=1, level_about=args.level_about, **options)
     u = env.unwrapped

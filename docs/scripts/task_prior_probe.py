@@ -12,12 +12,12 @@ A one-off diagnostic, not part of the package. Seed 0 unless `--seed`; env optio
 """
 
 import argparse
-import ast
 
 import gymnasium as gym
 import numpy as np
 
 import tasks
+from vlr.commands.task import _parse_options
 
 IDS = {"maze": tasks.MARBLE_MAZE, "cups": tasks.CUP_STACKING, "handwriting": tasks.HANDWRITING}
 
@@ -28,7 +28,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--option", action="append", default=[], metavar="KEY=VALUE")
     args = ap.parse_args()
-    options = {k: ast.literal_eval(v) for k, v in (o.split("=", 1) for o in args.option)}
+    options = _parse_options(args.option)
     env = gym.make(IDS[args.task], **options)
     u = env.unwrapped
     u.reset(seed=args.seed)
