@@ -43,6 +43,7 @@ __all__ = [
     "pose_error",
     "observed_motion",
     "row_weights",
+    "sample_particles",
     "numerical_jacobian",
     "reachable_motion",
     "transpose_step",
@@ -194,7 +195,7 @@ def observed_motion(before: PoseObservation, after: PoseObservation) -> np.ndarr
 
 # --------------------------------------------------------------------------- Eq. 10
 
-def _sample(state: ParticleState, n: int) -> ParticleState:
+def sample_particles(state: ParticleState, n: int) -> ParticleState:
     """`n` valid particles evenly spaced through the (resampled, equally weighted) set."""
     idx = np.flatnonzero(state.valid)
     if idx.size == 0:
@@ -217,7 +218,7 @@ def numerical_jacobian(motion: MotionModel, state: ParticleState, command: np.nd
     # A perturbation smaller than an action converges slowly near a tendon's slack kink or
     # a joint stop: allow more Newton iterations than the filter's per-action budget.
     cfg = replace(motion.config, max_iter=max(motion.config.max_iter, max_iter))
-    base = _sample(state, n_particles)
+    base = sample_particles(state, n_particles)
     # Settle the sample at the current command first: after the filter's jitter a particle
     # is slightly off its equilibrium, and that offset is not the tendon's doing.
     motion.solve(base, u, cfg)

@@ -15,22 +15,25 @@ filter only; the last line scores the pose against the target with ground truth.
 """
 
 import argparse
+import sys
 from dataclasses import replace
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
 import tasks
 from tasks.baseline import fitted_jacobian
-from vlr.commands.task import _parse_options
+from vlr.commands.task import parse_options
 from vlr.controller import (
-    _sample,
     numerical_jacobian,
     observed_motion,
     pose_error,
     reachable_motion,
     rotation_log,
+    sample_particles,
 )
+from vlr.errors import UserError
 
 
 def model_motion(pf, u: np.ndarray, du: np.ndarray, n: int = 64,
@@ -39,7 +42,7 @@ def model_motion(pf, u: np.ndarray, du: np.ndarray, n: int = 64,
     `u + du` (in `substeps` for Newton's sake), and how many particles solved."""
     motion = pf.motion
     cfg = replace(motion.config, max_iter=max(motion.config.max_iter, 200))
-    st = _sample(pf.state, n)
+    st = sample_particles(pf.state, n)
     motion.solve(st, u, cfg)
     p0, r0 = st.pos.copy(), st.rot.copy()
     for k in range(1, substeps + 1):
@@ -63,7 +66,7 @@ def main() -> None:
                     help="an env option, as `vlr task --option`")
     args = ap.parse_args()
     np.set_printoptions(precision=2, suppress=True)
-    env = gym.make(tasks.CUP_STACKING, n_cups=1, **_parse_options(args.option)).unwrapped
+    env = gym.make(tasks.CUP_STACKING, n_cups=1, **parse_options(args.option)).unwrapped
     env.reset(seed=args.seed)
     cfg = env.controller_config
     pos, rot = np.asarray(env.observation.position), np.asarray(env.observation.rotation)
@@ -92,4 +95,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except UserError as exc:   # a bad --option or --controller: one line, no traceback
+        sys.exit(f"{Path(__file__).name}: error: {exc}")

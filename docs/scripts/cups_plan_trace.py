@@ -15,14 +15,17 @@ defaults with the VLR baseline; the camera's view only, as the policy sees it.
 """
 
 import argparse
+import sys
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
 import tasks
 from tasks.baseline import fitted_jacobian
-from vlr.commands.task import _parse_options
+from vlr.commands.task import parse_options
 from vlr.controller import observed_motion, pose_error
+from vlr.errors import UserError
 
 
 def main() -> None:
@@ -34,8 +37,8 @@ def main() -> None:
     ap.add_argument("--controller", action="append", default=[], metavar="KEY=VALUE",
                     help="a controller setting of the baseline, as `vlr task --controller`")
     args = ap.parse_args()
-    options = _parse_options(args.option)
-    changes = _parse_options(args.controller, "--controller")
+    options = parse_options(args.option)
+    changes = parse_options(args.controller, "--controller")
     np.set_printoptions(precision=3, suppress=True)
     env = gym.make(tasks.CUP_STACKING, n_cups=1, level_about=args.level_about, **options)
     u = env.unwrapped
@@ -67,4 +70,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except UserError as exc:   # a bad --option or --controller: one line, no traceback
+        sys.exit(f"{Path(__file__).name}: error: {exc}")

@@ -12,12 +12,15 @@ A one-off diagnostic, not part of the package. Seed 0 unless `--seed`; env optio
 """
 
 import argparse
+import sys
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
 
 import tasks
-from vlr.commands.task import _parse_options
+from vlr.commands.task import parse_options
+from vlr.errors import UserError
 
 IDS = {"maze": tasks.MARBLE_MAZE, "cups": tasks.CUP_STACKING, "handwriting": tasks.HANDWRITING}
 
@@ -28,7 +31,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--option", action="append", default=[], metavar="KEY=VALUE")
     args = ap.parse_args()
-    options = _parse_options(args.option)
+    options = parse_options(args.option)
     env = gym.make(IDS[args.task], **options)
     u = env.unwrapped
     u.reset(seed=args.seed)
@@ -46,4 +49,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except UserError as exc:   # a bad --option or --controller: one line, no traceback
+        sys.exit(f"{Path(__file__).name}: error: {exc}")

@@ -73,7 +73,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=run)
 
 
-def _parse_options(items: list[str], flag: str = "--option") -> dict:
+def parse_options(items: list[str], flag: str = "--option") -> dict:
+    """KEY=VALUE items to a dict, each value a Python literal where it parses as one (else
+    the string); UserError naming `flag` and the item that has no "=" or no key."""
     import ast
 
     out = {}
@@ -146,7 +148,7 @@ def _checked(args: argparse.Namespace) -> tuple[str, str, dict, dict, dict]:
         raise UserError(f"--identify-iterations {args.identify_iterations} must be >= 0")
     if args.seed < 0:
         raise UserError(f"--seed {args.seed} must be >= 0")
-    options = _parse_options(args.option)
+    options = parse_options(args.option)
     env_id = found[args.name].load()      # importing the tasks package registers the envs
     if env_id not in gym.registry:
         raise UserError(f"task {args.name!r} ({env_id}) is not available in this version")
@@ -179,7 +181,7 @@ def _checked(args: argparse.Namespace) -> tuple[str, str, dict, dict, dict]:
         changes["jacobian_particles"] = args.jacobian_particles
     if args.controller:
         known = {f.name for f in dataclasses.fields(task_config)}
-        for key, value in _parse_options(args.controller, "--controller").items():
+        for key, value in parse_options(args.controller, "--controller").items():
             if key not in known:
                 raise UserError(f"--controller {key!r}: not a controller setting (one of "
                                 f"{', '.join(sorted(known))})")
