@@ -16,7 +16,7 @@ Delta phi' = [Delta x, Delta y, Delta z, alpha Delta roll, alpha Delta pitch, al
 Ours: "full_no_yaw" and "tilt" drop the yaw row (about the palm normal) for an object that is
 symmetric about it (a cup held level).
 Units of Eq. 12 are our choice (the paper does not give them): millimetres and degrees, so
-alpha = 9.5 makes one degree weigh as much as 9.5 mm.
+alpha = 9.5 makes one degree weigh as much as 9.5 mm (the cups use 0.7: tasks/cups.py).
 
 Pose errors: position target - current in the palm frame [m]; rotation as the rotation vector
 of R_target R_current^T in the palm frame [rad] (the spatial, left-multiplied convention, the
@@ -77,7 +77,8 @@ class ControllerConfig:
         rows: "position" | "orientation" | "full" | "full_no_yaw" | "tilt" (the rows of J
             and Delta phi kept, `ROWS`).
         method: "transpose" (Eq. 11) or "dls" (damped least squares).
-        alpha: orientation weight of Eq. 12 (9.5 for cup stacking); used with the rows that
+        alpha: orientation weight of Eq. 12 [mm per degree] (the paper: 9.5 for cup stacking,
+            in units it does not give; our cups: 0.7); used with the rows that
             mix position and rotation ("full", "full_no_yaw").
         gain: proportional gain on the step (1 = the full step the linear model asks for).
         damping: lambda of the damped least-squares step, in the units of Eq. 12 (mm, deg

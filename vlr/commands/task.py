@@ -59,7 +59,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "(vlr.controller.ControllerConfig.reversal_shrink; default: the task's)")
     p.add_argument("--alpha", type=float, default=None,
                    help="Eq. 12's rotation weight (mm per degree) on the full rows "
-                   "(default: the task's; cups 9.5, the paper's)")
+                   "(default: the task's; cups 0.7: docs/TASKS.md; the paper's 9.5 "
+                   "has no units)")
     p.add_argument("--jacobian-particles", type=int, default=None, metavar="N",
                    help="posterior particles the VLR's Jacobian (Eq. 10) is averaged over "
                    "(vlr.controller.ControllerConfig.jacobian_particles; default: the task's)")
