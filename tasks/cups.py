@@ -119,7 +119,7 @@ class CupStackingEnv(HandTaskEnv):
     # "The grasp guess of the tasks' identification").
     # alpha 0.7 mm per degree, not the paper's 9.5: the paper gives Eq. 12 no units, and
     # with the target where levelling leads (`_planned_shift`) alpha trades the position at
-    # release against the rotation; 0.7 was chosen from alphas 9.5, 2, 0.7 and 0.166 on
+    # release against the rotation; 0.7 was chosen from alphas 166 to 0.166 measured on
     # seeds 0-1 and holds on seeds 0-4 and held-out 5-9 (docs/TASKS.md, "Eq. 12's weight on
     # the cups (session 14)").
     controller_config = ControllerConfig(rows="full", alpha=0.7, method="dls", secant=True,
