@@ -16,7 +16,7 @@ With `--thumb`: from the task's centre (the 0.3 mm squeeze on), go to the band's
 printing the tilt, the tensions and whether the grasp held, until it does not.
 """
 
-import sys
+import argparse
 
 import gymnasium as gym
 import numpy as np
@@ -73,4 +73,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    thumb() if "--thumb" in sys.argv[1:] else main()
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--thumb", action="store_true",
+                    help="release the thumb past the band's corner (session 13)")
+    thumb() if ap.parse_args().thumb else main()

@@ -28,7 +28,12 @@ def main() -> None:
     p.add_argument("--particles", type=int, default=3000)
     p.add_argument("--actions", type=int, default=20)
     args = p.parse_args()
-    low, high = (v * 1e-3 for v in args.range)
+    lo, hi = args.range
+    if not 0 < lo <= hi <= args.band:
+        p.error(f"--range {lo} {hi} --band {args.band}: need 0 < LOW <= HIGH <= band [mm]")
+    if args.particles < 10 or args.actions < 1:
+        p.error(f"--particles {args.particles} must be >= 10, --actions {args.actions} >= 1")
+    low, high = lo * 1e-3, hi * 1e-3
     # `vlr.trial.identify_config` builds its IdentifyConfig from the module at call time.
     vlr.identify.IdentifyConfig = functools.partial(
         IdentifyConfig, action_range=(low, high), action_band=args.band * 1e-3)
