@@ -1,0 +1,262 @@
+"""`vlr crb`: how narrow an honest filter's intervals can be, from the simulator's true grasp
+(issue #5: "within 15 iterations"; `vlr.information`).
+
+The paper's convergence criterion is the mean 95% interval of the joint angles under 2
+degrees (METHOD.md 3). This tool linearises the filter's OWN model (the one `vlr identify`
+builds for the same settings: its prior, unknowns and likelihood scales) at the simulator's
+true configuration after the grasp, follows the actions `vlr identify --seed` takes (or,
+with `--candidates`, an oracle that picks each action to narrow the bound the most), and
+reports the Bayesian Cramér-Rao floor of that measure after each action, at the likelihood's
+scales and at the camera's own accuracy. A sim-only tool: it reads ground truth to choose the
+linearisation point; the estimator never runs it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from vlr.errors import UserError
+from vlr.explore import ExplorationRange, random_action
+
+__all__ = ["CrbSettings", "crb_report", "format_report", "register", "CAMERA_SIGMA"]
+
+# The rendered camera's pose accuracy (METHOD.md 8.2: 0.04-0.06 mm and 0.15-0.25 degree at
+# 640x480): the scales of a model with no error at all.
+CAMERA_SIGMA = (0.05, 0.2)
+
+
+@dataclass(frozen=True)
+class CrbSettings:
+    """One bound: the trial's settings (`vlr.trial.TrialSettings` fields of the same names)
+    and the bound's own.
+
+    Attributes:
+        candidates: 0 follows `vlr identify`'s random actions; K > 0 picks each action among
+            K random candidates as the one that narrows the bound most (an oracle: it knows
+            the truth, so no filter can choose better from those candidates).
+        relative_step: central-difference step over each prior spread (`vlr.information`).
+        target_deg: the convergence criterion [deg] (METHOD.md 3).
+        budget: the actions at which the scales that would just meet the criterion are
+            reported (the paper's 15.1 iterations).
+    """
+
+    object: str = "apple"
+    hand: str = "modelo"
+    true_hand: str | None = None
+    unknowns: tuple[str, ...] = ()
+    seed: int = 0
+    actions: int = 20
+    sigma_pos_mm: float | None = None
+    sigma_rot_deg: float | None = None
+    nominal_theta_deg: tuple[float, ...] | None = None
+    prior_spread_deg: float | None = None
+    candidates: int = 0
+    relative_step: float = 0.02
+    target_deg: float = 2.0
+    budget: int = 15
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.actions, int) or self.actions < 1:
+            raise UserError(f"actions {self.actions!r} must be an integer >= 1")
+        if not isinstance(self.candidates, int) or self.candidates < 0:
+            raise UserError(f"candidates {self.candidates!r} must be an integer >= 0")
+        if not 0 < self.relative_step < 0.5:
+            raise UserError(f"relative step {self.relative_step!r} must be in (0, 0.5)")
+        if not self.target_deg > 0:
+            raise UserError(f"target {self.target_deg!r} deg must be > 0")
+        if not isinstance(self.budget, int) or self.budget < 1:
+            raise UserError(f"budget {self.budget!r} must be an integer >= 1")
+
+
+def _trial_settings(s: CrbSettings):
+    from vlr.trial import TrialSettings
+
+    return TrialSettings(backend="sim", object=s.object, hand=s.hand, true_hand=s.true_hand,
+                         unknowns=tuple(s.unknowns), seed=s.seed, particles=1000,
+                         max_iterations=s.actions, sigma_pos_mm=s.sigma_pos_mm,
+                         sigma_rot_deg=s.sigma_rot_deg,
+                         nominal_theta_deg=s.nominal_theta_deg,
+                         prior_spread_deg=s.prior_spread_deg)
+
+
+def _scale_for(trace, sigma: tuple[float, float], target: float) -> float:
+    """The factor c for which scales c * sigma just give a mean width of `target` now."""
+    def width(c: float) -> float:
+        return trace.bound(c * sigma[0], c * sigma[1]).mean_width_deg
+
+    lo, hi = 1e-3, 1e3
+    if width(lo) > target:
+        return 0.0
+    if width(hi) < target:
+        return math.inf
+    for _ in range(60):
+        mid = math.sqrt(lo * hi)
+        lo, hi = (mid, hi) if width(mid) < target else (lo, mid)
+    return lo
+
+
+def crb_report(s: CrbSettings) -> dict:
+    """Grasp in the sim, then follow the actions (module docstring); the bound after each."""
+    from vlr.filter import ParticleFilter
+    from vlr.information import InformationTrace, truth_vector
+    from vlr.trial import identify_config, open_world
+
+    t_start = time.perf_counter()
+    ts = _trial_settings(s)
+    world = open_world(ts)
+    try:
+        cfg = identify_config(ts, world.model)
+        pf = ParticleFilter(world.model, world.obj, cfg.filter)
+        sigma = (ts.sigma[0] * 1e-3, math.radians(ts.sigma[1]))
+        camera = (CAMERA_SIGMA[0] * 1e-3, math.radians(CAMERA_SIGMA[1]))
+        u = np.asarray(world.world.grasp().commands, float)
+        truth = world.truth()
+        trace = InformationTrace(pf, truth_vector(pf, truth), truth.position, truth.rotation,
+                                 u, s.relative_step)
+        rng = np.random.default_rng(s.seed + 1)  # vlr identify's action stream
+        explore = ExplorationRange(cfg.action_range[0], cfg.action_range[1],
+                                   max(cfg.action_band, cfg.action_range[1]))
+        center = u.copy()
+        rows = [_row(trace, sigma, camera)]
+        scale_at_budget = None
+        lost = None
+        for k in range(1, s.actions + 1):
+            if s.candidates:
+                delta = _oracle(trace, rng, u, center, explore, s.candidates, sigma)
+            else:
+                delta = random_action(rng, u, center, explore)
+            report = world.world.apply(delta)
+            if not report.grasp_held:
+                lost = k
+                break
+            u = np.asarray(report.commands, float)
+            trace.act(u)
+            rows.append(_row(trace, sigma, camera))
+            if k == s.budget:
+                scale_at_budget = _scale_for(trace, sigma, s.target_deg)
+        last = trace.bound(*sigma)
+    finally:
+        world.close()
+
+    def first_under(key: str) -> int | None:
+        return next((r["actions"] for r in rows if r[key] < s.target_deg), None)
+
+    return {
+        "object": s.object, "hand": s.hand, "true_hand": s.true_hand,
+        "unknowns": list(s.unknowns), "seed": s.seed,
+        "actions": "oracle" if s.candidates else "random", "candidates": s.candidates,
+        "sigma_pos_mm": ts.sigma[0], "sigma_rot_deg": ts.sigma[1],
+        "camera_sigma": list(CAMERA_SIGMA), "prior_spread_deg": ts.grasp_guess[1],
+        "relative_step": s.relative_step, "target_deg": s.target_deg,
+        "grasp_lost_at": lost,
+        "first_under_target": first_under("mean_width_deg"),
+        "first_under_target_camera": first_under("mean_width_deg_camera"),
+        "budget": s.budget,
+        "scale_to_meet_at_budget": scale_at_budget,
+        "joint_width_deg": dict(zip(pf.dim_names, last.joint_width_deg.tolist(),
+                                    strict=False)),
+        "unknown_std": dict(zip([u.spec for u in pf.unknowns], last.unknown_std.tolist(),
+                                strict=True)),
+        "by_action": rows,
+        "seconds": time.perf_counter() - t_start,
+    }
+
+
+def _row(trace, sigma, camera) -> dict:
+    b, c = trace.bound(*sigma), trace.bound(*camera)
+    return {"actions": trace.actions, "mean_width_deg": b.mean_width_deg,
+            "mean_width_deg_camera": c.mean_width_deg,
+            "unknown_std": b.unknown_std.tolist()}
+
+
+def _oracle(trace, rng, u, center, explore, k: int, sigma) -> np.ndarray:
+    """Of k random candidates, the one whose bound after it is narrowest (first if every
+    preview fails)."""
+    cands = [random_action(rng, u, center, explore) for _ in range(k)]
+    best, best_w = cands[0], math.inf
+    for d in cands:
+        b = trace.preview(u + d, *sigma)
+        if b is not None and b.mean_width_deg < best_w:
+            best, best_w = d, b.mean_width_deg
+    return best
+
+
+def format_report(rep: dict) -> str:
+    """The bound against actions, a line a person reads, per row."""
+    who = rep["object"] + (f", {rep['true_hand']} (filter: {rep['hand']})"
+                           if rep["true_hand"] else f", {rep['hand']}")
+    head = (f"{who}, seed {rep['seed']}, {rep['actions']} actions"
+            + (f" of {rep['candidates']} candidates" if rep["candidates"] else "")
+            + f": floor of the mean 95% joint interval [deg] at the likelihood's "
+            f"{rep['sigma_pos_mm']} mm / {rep['sigma_rot_deg']} deg and at the camera's "
+            f"{rep['camera_sigma'][0]} mm / {rep['camera_sigma'][1]} deg")
+    lines = [head, f"{'actions':>8s} {'likelihood':>11s} {'camera':>8s}"
+             + "".join(f" {'sd ' + n:>26s}" for n in rep["unknown_std"])]
+    for r in rep["by_action"]:
+        lines.append(f"{r['actions']:8d} {r['mean_width_deg']:11.2f} "
+                     f"{r['mean_width_deg_camera']:8.2f}"
+                     + "".join(f" {v:26.4g}" for v in r["unknown_std"]))
+    t = rep["target_deg"]
+    lines.append(f"under {t} deg: at action {rep['first_under_target']} (likelihood), "
+                 f"{rep['first_under_target_camera']} (camera)")
+    c = rep["scale_to_meet_at_budget"]
+    if c is not None:
+        lines.append(f"to be under {t} deg after {rep['budget']} actions the scales must be "
+                     f"at most {c:.2f}x the likelihood's: {c * rep['sigma_pos_mm']:.3f} mm / "
+                     f"{c * rep['sigma_rot_deg']:.3f} deg")
+    if rep["grasp_lost_at"]:
+        lines.append(f"grasp lost at action {rep['grasp_lost_at']}")
+    return "\n".join(lines)
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("crb", help="the Cramér-Rao floor of the filter's intervals along a "
+                       "trial's actions, from the simulator's true grasp")
+    p.add_argument("--object", default="apple", help="object name or spec file")
+    p.add_argument("--hand", default="modelo", help="the filter's hand (default modelo)")
+    p.add_argument("--true-hand", default=None, help="the sim's hand when it differs")
+    p.add_argument("--unknown", action="append", default=[], metavar="SPEC",
+                   help="an unknown parameter, as `vlr identify --unknown` (repeatable)")
+    p.add_argument("--seed", type=int, default=0, help="the trial's seed (its actions)")
+    p.add_argument("--actions", type=int, default=20, help="actions (default 20)")
+    p.add_argument("--candidates", type=int, default=0, metavar="K",
+                   help="oracle actions: each the best of K random candidates (default 0: "
+                   "vlr identify's random actions)")
+    p.add_argument("--sigma-pos-mm", type=float, default=None)
+    p.add_argument("--sigma-rot-deg", type=float, default=None)
+    p.add_argument("--nominal-theta-deg", type=float, nargs="+", default=None)
+    p.add_argument("--prior-spread-deg", type=float, default=None)
+    p.add_argument("--relative-step", type=float, default=0.02,
+                   help="finite-difference step over each prior spread (default 0.02)")
+    p.add_argument("--json", default=None, metavar="FILE", help="write the report as JSON")
+    p.set_defaults(func=_main)
+
+
+def _main(args: argparse.Namespace) -> int:
+    from pathlib import Path
+
+    from vlr.io import write_json_atomic
+
+    if args.json and not Path(args.json).resolve().parent.is_dir():
+        raise UserError(f"--json {args.json}: its folder does not exist")
+    s = CrbSettings(object=args.object, hand=args.hand, true_hand=args.true_hand,
+                    unknowns=tuple(args.unknown), seed=args.seed, actions=args.actions,
+                    sigma_pos_mm=args.sigma_pos_mm, sigma_rot_deg=args.sigma_rot_deg,
+                    nominal_theta_deg=(tuple(args.nominal_theta_deg)
+                                       if args.nominal_theta_deg else None),
+                    prior_spread_deg=args.prior_spread_deg, candidates=args.candidates,
+                    relative_step=args.relative_step)
+    try:
+        rep = crb_report(s)
+    except FloatingPointError as exc:
+        raise UserError(f"the bound could not be linearised: {exc}") from None
+    print(format_report(rep))
+    if args.json:
+        write_json_atomic(args.json, rep)
+        print(f"wrote {args.json}")
+    return 0

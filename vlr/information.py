@@ -1,0 +1,206 @@
+"""How much an identification run can know: the Bayesian Cramér-Rao bound of the filter's
+own model along a command sequence (METHOD.md 3, 8.2; issue #5's convergence target).
+
+The filter's state is the vector x of its sampled dimensions (`ParticleFilter.pack`: joint
+angles, pad contact angles, unknowns). A particle takes the observed POM pose at the grasp,
+settles at u_0 and is moved by every action (Eq. 4, 9); its predicted POM poses
+y_t = Gamma/Lambda(x; u_0..u_t) (Eq. 5) are what the camera's poses weigh. With the
+likelihood's Gaussian scales (sigma_pos, sigma_rot), the information about x after t
+actions is
+
+    J_t = P_0^-1 + sum_{s <= t} H_s^T R^-1 H_s,   H_s = dy_s / dx,
+    R = diag(sigma_pos^2 I_3, sigma_rot^2 I_3),
+
+P_0 the prior's covariance (the filter's spreads; a uniform unknown's variance). No
+estimator whose posterior is consistent with that likelihood has a covariance of the joint
+angles at t below G_t J_t^-1 G_t^T, G_t = d theta_t / dx (van Trees' inequality,
+linearised at x). The narrowest honest 95% interval of a joint is then 3.92 of its standard
+deviation: the paper's convergence measure (METHOD.md 3) has a floor that depends only on
+the model, the actions and the scales, not on the particle count.
+
+Derivatives are central differences over the filter's own motion model, batched as
+particles (1 + 2D of them), each dimension stepped by `relative_step` of its prior
+spread. J splits into a position part and a rotation part, so one run gives the bound at
+every pair of scales.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from vlr.filter import ParticleFilter
+from vlr.motion import STATUS, ParticleState
+
+__all__ = ["prior_std", "init_motion_config", "truth_vector", "InformationTrace", "Bound"]
+
+WIDTH_95 = 2.0 * 1.959963984540054  # a Gaussian's 95% interval in standard deviations
+
+
+def prior_std(pf: ParticleFilter) -> np.ndarray:
+    """(D,) the filter's prior spread per sampled dimension (`ParticleFilter.initialize`):
+    the joint angles' and the contact angles' Gaussian spreads, a uniform unknown's
+    standard deviation (high - low) / sqrt(12)."""
+    m, cfg = pf.model, pf.config
+    s = [np.full(m.n_fingers * m.n_joints, cfg.theta_spread),
+         np.full(2 * m.n_fingers, cfg.contact_spread)]
+    s += [np.array([(u.prior[1] - u.prior[0]) / np.sqrt(12.0)]) for u in pf.unknowns]
+    return np.concatenate(s)
+
+
+def init_motion_config(pf: ParticleFilter):
+    """The motion settings of the filter's settle at the grasp (`ParticleFilter.initialize`)."""
+    c = pf.config
+    return replace(c.motion, jump_theta=c.init_jump_theta, jump_pos=0.05,
+                   max_iter=max(c.motion.max_iter, 100))
+
+
+def truth_vector(pf: ParticleFilter, truth) -> np.ndarray:
+    """(D,) the filter's sampled dimensions at a true state (`vlr.synthetic.Truth` or the
+    sim's): joint angles, pad contacts and the unknowns' true values. For bounds only: the
+    filter itself never sees it."""
+    st = ParticleState.nominal(pf.model, 1, truth.theta, truth.normals, truth.position,
+                               truth.rotation)
+    st.segments[0] = truth.segments
+    st.stiffness[0] = truth.stiffness
+    st.tendon[0] = truth.tendon
+    return pf.pack(st)[0]
+
+
+@dataclass(frozen=True)
+class Bound:
+    """The bound after some actions, at one pair of likelihood scales.
+
+    Attributes:
+        actions: actions taken (0: the grasp's observation only).
+        joint_width_deg: (N*K,) narrowest 95% interval of each joint angle [deg].
+        mean_width_deg: their mean: the floor of the paper's convergence measure.
+        unknown_std: (U,) standard deviation bound of each unknown [SI units].
+    """
+
+    actions: int
+    joint_width_deg: np.ndarray
+    mean_width_deg: float
+    unknown_std: np.ndarray
+
+
+class InformationTrace:
+    """The information about x accumulated along a command sequence (module docstring).
+
+    Args:
+        pf: the filter whose model, prior and unknowns are bounded (its particles unused).
+        x: (D,) the linearisation point: the sampled dimensions at the grasp.
+        position, rotation: the POM pose the particles take at the grasp [m], (3, 3).
+        command: u_0 (N,) [m].
+        relative_step: central-difference step as a fraction of each prior spread.
+    """
+
+    def __init__(self, pf: ParticleFilter, x: np.ndarray, position: np.ndarray,
+                 rotation: np.ndarray, command: np.ndarray, relative_step: float = 0.02):
+        if not 0 < relative_step < 1:
+            raise ValueError(f"relative_step {relative_step!r} must be in (0, 1)")
+        self.pf = pf
+        self.x = np.asarray(x, dtype=float)
+        self.scale = prior_std(pf)
+        if self.x.shape != self.scale.shape:
+            raise ValueError(f"x has {self.x.size} dimensions, the filter samples "
+                             f"{self.scale.size} ({', '.join(pf.dim_names)})")
+        self.step_size = relative_step
+        d = self.x.size
+        offsets = np.zeros((1 + 2 * d, d))
+        offsets[1:d + 1] = np.eye(d) * relative_step
+        offsets[d + 1:] = -np.eye(d) * relative_step
+        m = pf.model
+        st = ParticleState.nominal(m, 1 + 2 * d, np.zeros((m.n_fingers, m.n_joints)),
+                                   np.zeros((m.n_fingers, 3)) + [0, 1, 0],
+                                   np.asarray(position, float), np.asarray(rotation, float))
+        pf.unpack(self.x[None] + offsets * self.scale[None], st)
+        st.anchor_to_pose(m)
+        status, _ = pf.motion.solve(st, np.asarray(command, float), init_motion_config(pf))
+        self._check(st, status, "the grasp's settle")
+        self.state = st
+        self.command = np.asarray(command, float).copy()
+        self.actions = 0
+        # Information in prior-normalised coordinates v = (x - x0) / scale.
+        self.info_pos = np.zeros((d, d))
+        self.info_rot = np.zeros((d, d))
+        self._add(st)
+
+    @property
+    def dims(self) -> int:
+        return self.x.size
+
+    def _check(self, st: ParticleState, status: np.ndarray, what: str) -> None:
+        if not st.valid.all():
+            bad = [self.pf.dim_names[(i - 1) % self.dims] for i in np.flatnonzero(~st.valid)]
+            codes = sorted({STATUS[int(c)] for c in status[~st.valid]})
+            raise FloatingPointError(
+                f"{what}: {int((~st.valid).sum())} of {st.n} solves failed ({', '.join(codes)})"
+                f"{' at the linearisation point' if not st.valid[0] else ''}; stepped "
+                f"dimensions {', '.join(sorted(set(bad)))}: try a smaller relative_step")
+
+    def pose_jacobian(self, st: ParticleState | None = None) -> tuple[np.ndarray, np.ndarray]:
+        """dy/dv of the POM position [m] and rotation vector [rad], (3, D) each."""
+        st = self.state if st is None else st
+        d, h = self.dims, self.step_size
+        plus, minus = slice(1, d + 1), slice(d + 1, 2 * d + 1)
+        jp = (st.pos[plus] - st.pos[minus]).T / (2 * h)
+        rel = np.einsum("pab,pcb->pac", st.rot[plus], st.rot[minus])
+        jr = Rotation.from_matrix(rel).as_rotvec().T / (2 * h)
+        return jp, jr
+
+    def _add(self, st: ParticleState) -> None:
+        jp, jr = self.pose_jacobian(st)
+        self.info_pos += jp.T @ jp
+        self.info_rot += jr.T @ jr
+
+    def output_jacobian(self, st: ParticleState | None = None) -> np.ndarray:
+        """(N*K + U, D): d(theta_t, unknowns)/dv at the current state."""
+        st = self.state if st is None else st
+        d, h = self.dims, self.step_size
+        th = st.theta.reshape(st.n, -1)
+        g = (th[1:d + 1] - th[d + 1:]).T / (2 * h)
+        u = len(self.pf.unknowns)
+        gu = np.zeros((u, d))
+        cols = d - u + np.arange(u)
+        gu[np.arange(u), cols] = self.scale[cols]  # the unknowns do not move
+        return np.vstack([g, gu])
+
+    def act(self, command: np.ndarray) -> None:
+        """Move the linearisation by one action to `command` and add its observation."""
+        command = np.asarray(command, float)
+        status, _ = self.pf.motion.solve(self.state, command, u_from=self.command)
+        self._check(self.state, status, f"action {self.actions + 1}")
+        self.command = command.copy()
+        self.actions += 1
+        self._add(self.state)
+
+    def bound(self, sigma_pos: float, sigma_rot: float,
+              extra: tuple[np.ndarray, np.ndarray] | None = None,
+              st: ParticleState | None = None) -> Bound:
+        """The bound now at scales sigma_pos [m], sigma_rot [rad] (module docstring).
+        `extra`, `st`: the information and the state of a previewed action."""
+        ip, ir = self.info_pos, self.info_rot
+        if extra is not None:
+            ip, ir = ip + extra[0], ir + extra[1]
+        info = np.eye(self.dims) + ip / sigma_pos**2 + ir / sigma_rot**2
+        g = self.output_jacobian(st)
+        cov = g @ np.linalg.solve(info, g.T)
+        sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        n_th = self.pf.model.n_fingers * self.pf.model.n_joints
+        width = np.degrees(WIDTH_95 * sd[:n_th])
+        return Bound(self.actions + (extra is not None), width, float(width.mean()),
+                     sd[n_th:])
+
+    def preview(self, command: np.ndarray, sigma_pos: float,
+                sigma_rot: float) -> Bound | None:
+        """The bound if the next action went to `command` (the trace unchanged); None if a
+        solve failed."""
+        st = self.state.copy()
+        self.pf.motion.solve(st, np.asarray(command, float), u_from=self.command)
+        if not st.valid.all():
+            return None
+        jp, jr = self.pose_jacobian(st)
+        return self.bound(sigma_pos, sigma_rot, (jp.T @ jp, jr.T @ jr), st)
