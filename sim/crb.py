@@ -16,12 +16,13 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
+from vlr.trial import TrialSettings
 
 __all__ = ["CrbSettings", "crb_report", "format_report", "register", "CAMERA_SIGMA"]
 
@@ -30,12 +31,18 @@ __all__ = ["CrbSettings", "crb_report", "format_report", "register", "CAMERA_SIG
 CAMERA_SIGMA = (0.05, 0.2)
 
 
+def _sim_trial() -> TrialSettings:
+    return TrialSettings(backend="sim", particles=1000, max_iterations=20)
+
+
 @dataclass(frozen=True)
 class CrbSettings:
-    """One bound: the trial's settings (`vlr.trial.TrialSettings` fields of the same names)
-    and the bound's own.
+    """One bound: the trial it bounds and the bound's own settings.
 
     Attributes:
+        trial: the trial (`vlr.trial.TrialSettings`, backend "sim"): its object, hands,
+            unknowns, prior, likelihood scales and seed (its actions); `max_iterations` is
+            the number of actions. Its particle count does not matter.
         candidates: 0 follows `vlr identify`'s random actions; K > 0 picks each action among
             K random candidates as the one that narrows the bound most (an oracle: it knows
             the truth, so no filter can choose better from those candidates).
@@ -45,24 +52,16 @@ class CrbSettings:
             reported (the paper's 15.1 iterations).
     """
 
-    object: str = "apple"
-    hand: str = "modelo"
-    true_hand: str | None = None
-    unknowns: tuple[str, ...] = ()
-    seed: int = 0
-    actions: int = 20
-    sigma_pos_mm: float | None = None
-    sigma_rot_deg: float | None = None
-    nominal_theta_deg: tuple[float, ...] | None = None
-    prior_spread_deg: float | None = None
+    trial: TrialSettings = field(default_factory=_sim_trial)
     candidates: int = 0
     relative_step: float = 0.02
     target_deg: float = 2.0
     budget: int = 15
 
     def __post_init__(self) -> None:
-        if not isinstance(self.actions, int) or self.actions < 1:
-            raise UserError(f"actions {self.actions!r} must be an integer >= 1")
+        if self.trial.backend != "sim":
+            raise UserError(f"backend {self.trial.backend!r}: the bound is linearised at the "
+                            "simulator's true grasp; use the sim")
         if not isinstance(self.candidates, int) or self.candidates < 0:
             raise UserError(f"candidates {self.candidates!r} must be an integer >= 0")
         if not 0 < self.relative_step < 0.5:
@@ -72,16 +71,9 @@ class CrbSettings:
         if not isinstance(self.budget, int) or self.budget < 1:
             raise UserError(f"budget {self.budget!r} must be an integer >= 1")
 
-
-def _trial_settings(s: CrbSettings):
-    from vlr.trial import TrialSettings
-
-    return TrialSettings(backend="sim", object=s.object, hand=s.hand, true_hand=s.true_hand,
-                         unknowns=tuple(s.unknowns), seed=s.seed, particles=1000,
-                         max_iterations=s.actions, sigma_pos_mm=s.sigma_pos_mm,
-                         sigma_rot_deg=s.sigma_rot_deg,
-                         nominal_theta_deg=s.nominal_theta_deg,
-                         prior_spread_deg=s.prior_spread_deg)
+    @property
+    def actions(self) -> int:
+        return self.trial.max_iterations
 
 
 def _scale_for(trace, sigma: tuple[float, float], target: float) -> float:
@@ -107,7 +99,7 @@ def crb_report(s: CrbSettings) -> dict:
     from vlr.trial import identify_config, open_world
 
     t_start = time.perf_counter()
-    ts = _trial_settings(s)
+    ts = s.trial
     world = open_world(ts)
     try:
         cfg = identify_config(ts, world.model)
@@ -118,7 +110,7 @@ def crb_report(s: CrbSettings) -> dict:
         truth = world.truth()
         trace = InformationTrace(pf, truth_vector(pf, truth), truth.position, truth.rotation,
                                  u, s.relative_step)
-        rng = np.random.default_rng(s.seed + 1)  # vlr identify's action stream
+        rng = np.random.default_rng(ts.seed + 1)  # vlr identify's action stream
         explore = ExplorationRange(cfg.action_range[0], cfg.action_range[1],
                                    max(cfg.action_band, cfg.action_range[1]))
         center = u.copy()
@@ -147,8 +139,8 @@ def crb_report(s: CrbSettings) -> dict:
         return next((r["actions"] for r in rows if r[key] < s.target_deg), None)
 
     return {
-        "object": s.object, "hand": s.hand, "true_hand": s.true_hand,
-        "unknowns": list(s.unknowns), "seed": s.seed,
+        "object": ts.object, "hand": ts.hand, "true_hand": ts.true_hand,
+        "unknowns": list(ts.unknowns), "seed": ts.seed,
         "actions": "oracle" if s.candidates else "random", "candidates": s.candidates,
         "sigma_pos_mm": ts.sigma[0], "sigma_rot_deg": ts.sigma[1],
         "camera_sigma": list(CAMERA_SIGMA), "prior_spread_deg": ts.grasp_guess[1],
@@ -214,9 +206,45 @@ def format_report(rep: dict) -> str:
     return "\n".join(lines)
 
 
+def summary_table(reports: list[tuple[str, dict]]) -> str:
+    """Markdown, one row per case: the floor after the budget and after the last action (mean
+    +- SD over seeds) at the likelihood's and the camera's scales, the seeds whose floor
+    meets the criterion, and the likelihood scales that would meet it at the budget."""
+    cases: dict[str, list[dict]] = {}
+    for case, rep in reports:
+        cases.setdefault(case, []).append(rep)
+
+    def ms(v: list[float]) -> str:
+        v = [x for x in v if x is not None and math.isfinite(x)]
+        return f"{np.mean(v):.2f} ± {np.std(v):.2f}" if v else "-"
+
+    def at(rep: dict, k: int, key: str) -> float | None:
+        return next((r[key] for r in rep["by_action"] if r["actions"] == k), None)
+
+    b = reports[0][1]["budget"] if reports else 15
+    lines = [f"| case | floor after {b}, likelihood [deg] | after {b}, camera | after the last "
+             "action, likelihood | seeds under the criterion (likelihood / camera) | scales "
+             f"that meet it after {b}, x the likelihood's | unknowns' SD after the last |",
+             "|---|---|---|---|---|---|---|"]
+    for case, reps in cases.items():
+        last = [r["by_action"][-1]["mean_width_deg"] for r in reps]
+        under = sum(r["first_under_target"] is not None for r in reps)
+        under_c = sum(r["first_under_target_camera"] is not None for r in reps)
+        sds = "; ".join(f"{name} {np.mean([r['unknown_std'][name] for r in reps]):.3g}"
+                        for name in reps[0]["unknown_std"])
+        lines.append(f"| {case} | {ms([at(r, b, 'mean_width_deg') for r in reps])} | "
+                     f"{ms([at(r, b, 'mean_width_deg_camera') for r in reps])} | {ms(last)} | "
+                     f"{under}/{len(reps)} / {under_c}/{len(reps)} | "
+                     f"{ms([r['scale_to_meet_at_budget'] for r in reps])} | {sds} |")
+    return "\n".join(lines)
+
+
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("crb", help="the Cramér-Rao floor of the filter's intervals along a "
                        "trial's actions, from the simulator's true grasp")
+    p.add_argument("--sweep", default=None, metavar="FILE",
+                   help="bound every trial of a sweep file (its cases and seeds; the "
+                   "trial options below are then ignored)")
     p.add_argument("--object", default="apple", help="object name or spec file")
     p.add_argument("--hand", default="modelo", help="the filter's hand (default modelo)")
     p.add_argument("--true-hand", default=None, help="the sim's hand when it differs")
@@ -237,6 +265,23 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_main)
 
 
+def _trials(args: argparse.Namespace) -> list[tuple[str, TrialSettings]]:
+    from dataclasses import replace
+
+    from vlr.sweep import expand, load_sweep
+
+    if args.sweep:
+        return [(t.case, replace(t.settings, particles=1000))
+                for t in expand(load_sweep(args.sweep))]
+    return [("trial", TrialSettings(
+        backend="sim", object=args.object, hand=args.hand, true_hand=args.true_hand,
+        unknowns=tuple(args.unknown), seed=args.seed, particles=1000,
+        max_iterations=args.actions, sigma_pos_mm=args.sigma_pos_mm,
+        sigma_rot_deg=args.sigma_rot_deg,
+        nominal_theta_deg=tuple(args.nominal_theta_deg) if args.nominal_theta_deg else None,
+        prior_spread_deg=args.prior_spread_deg))]
+
+
 def _main(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -244,19 +289,23 @@ def _main(args: argparse.Namespace) -> int:
 
     if args.json and not Path(args.json).resolve().parent.is_dir():
         raise UserError(f"--json {args.json}: its folder does not exist")
-    s = CrbSettings(object=args.object, hand=args.hand, true_hand=args.true_hand,
-                    unknowns=tuple(args.unknown), seed=args.seed, actions=args.actions,
-                    sigma_pos_mm=args.sigma_pos_mm, sigma_rot_deg=args.sigma_rot_deg,
-                    nominal_theta_deg=(tuple(args.nominal_theta_deg)
-                                       if args.nominal_theta_deg else None),
-                    prior_spread_deg=args.prior_spread_deg, candidates=args.candidates,
-                    relative_step=args.relative_step)
-    try:
-        rep = crb_report(s)
-    except FloatingPointError as exc:
-        raise UserError(f"the bound could not be linearised: {exc}") from None
-    print(format_report(rep))
+    settings = [(case, CrbSettings(trial=t, candidates=args.candidates,
+                                   relative_step=args.relative_step))
+                for case, t in _trials(args)]
+    reports = []
+    for case, s in settings:
+        try:
+            rep = crb_report(s)
+        except FloatingPointError as exc:
+            raise UserError(f"{case}, seed {s.trial.seed}: the bound could not be "
+                            f"linearised: {exc}") from None
+        print(format_report(rep) + "\n", flush=True)
+        reports.append((case, rep))
+    if args.sweep:
+        print(summary_table(reports))
     if args.json:
-        write_json_atomic(args.json, rep)
+        write_json_atomic(args.json, reports[0][1] if not args.sweep else
+                          {"sweep": args.sweep, "trials": [{"case": c, **r}
+                                                           for c, r in reports]})
         print(f"wrote {args.json}")
     return 0

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from vlr.active import ActiveExploration, choose_action, prediction_spread
+from vlr.active import ActiveExploration, choose_action, expected_joint_sd, prediction_spread
+from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
 from vlr.motion import rotvec_to_matrix
 from vlr.trial import TrialSettings, run_trial
@@ -112,3 +113,28 @@ def test_active_identification_runs_end_to_end():
     r = run_trial(TrialSettings(backend="synthetic", particles=500, seed=0, max_iterations=3,
                                 exploration="active"))
     assert r["iterations"] >= 1 and np.isfinite(r["errors"]["proximal_deg_mean"])
+
+
+def test_expected_joint_sd_is_small_when_the_pose_tells_the_joints():
+    rng = np.random.default_rng(0)
+    n = 400
+    rotvec = rng.normal(0, 0.02, (n, 3))
+    rot = rotvec_to_matrix(rotvec)
+    pos = rng.normal(0, 1e-3, (n, 3))
+    told = np.concatenate([pos * 100, rotvec * 10], axis=1)  # the joints follow the pose
+    untold = rng.normal(0, 0.05, (n, 6))                      # the joints do not
+    prior = untold.std(axis=0, ddof=1).mean()
+    sp, sr = 1e-5, 1e-4
+    assert expected_joint_sd(told, pos, rot, sp, sr) < 0.02 * told.std(axis=0).mean()
+    assert abs(expected_joint_sd(untold, pos, rot, sp, sr) - prior) < 0.1 * prior
+    # A wide likelihood learns little: the posterior stays near the prior.
+    wide = expected_joint_sd(told, pos, rot, 1.0, 10.0)
+    assert abs(wide - told.std(axis=0, ddof=1).mean()) < 0.01 * wide
+
+
+def test_active_variance_identification_runs_end_to_end():
+    r = run_trial(TrialSettings(backend="synthetic", particles=500, seed=0, max_iterations=3,
+                                exploration="active", active_criterion="variance"))
+    assert r["iterations"] >= 1 and np.isfinite(r["errors"]["proximal_deg_mean"])
+    with pytest.raises(UserError, match="criterion"):
+        TrialSettings(exploration="active", active_criterion="entropy")

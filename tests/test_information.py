@@ -84,7 +84,8 @@ def test_information_only_grows_and_narrower_scales_narrow_the_floor(synthetic_t
 
 
 def test_apple_floor_is_above_the_criterion_at_the_likelihoods_scales():
-    rep = crb_report(CrbSettings(object="apple", seed=0, actions=15))
+    rep = crb_report(CrbSettings(trial=TrialSettings(backend="sim", object="apple", seed=0,
+                                                     max_iterations=15)))
     at = {r["actions"]: r for r in rep["by_action"]}
     assert rep["grasp_lost_at"] is None and len(rep["by_action"]) == 16
     # 4.64 and 0.95 degrees when written; the model's information, not the particle count,
@@ -105,7 +106,7 @@ def test_crb_cli_writes_json(tmp_path, capsys):
     assert "floor of the mean 95% joint interval" in capsys.readouterr().out
 
 
-@pytest.mark.parametrize("kw", [dict(actions=0), dict(candidates=-1),
+@pytest.mark.parametrize("kw", [dict(candidates=-1), dict(target_deg=0.0),
                                 dict(relative_step=0.0), dict(budget=0)])
 def test_bad_crb_settings_are_named(kw):
     with pytest.raises(UserError, match=next(iter(kw)).split("_")[0]):
@@ -115,3 +116,8 @@ def test_bad_crb_settings_are_named(kw):
 def test_crb_cli_bad_json_folder(tmp_path, capsys):
     assert main(["crb", "--json", str(tmp_path / "missing" / "c.json")]) == 2
     assert "folder does not exist" in capsys.readouterr().err
+
+
+def test_crb_needs_the_sim():
+    with pytest.raises(UserError, match="synthetic"):
+        CrbSettings(trial=TrialSettings(backend="synthetic"))

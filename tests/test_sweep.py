@@ -147,6 +147,16 @@ def test_the_row_reads_the_error_after_the_papers_15_actions():
     assert _row(rec)["proximal_deg_at_15"] == 1.0
 
 
+def test_the_row_reads_the_interval_at_15_actions_and_at_the_end():
+    from vlr.sweep import _row
+
+    rec = {"case": "c", "status": "ok", "settings": {},
+           "result": {"ci_deg_by_iteration": [30.0 - i for i in range(21)]}}
+    assert (_row(rec)["ci_deg_at_15"], _row(rec)["ci_deg"]) == (15.0, 10.0)
+    rec["result"]["ci_deg_by_iteration"] = [30.0, 1.5]  # converged after one action
+    assert (_row(rec)["ci_deg_at_15"], _row(rec)["ci_deg"]) == (None, 1.5)
+
+
 def test_the_row_compares_the_proximal_links_alone_with_the_paper():
     from vlr.sweep import _row, summarize_rows
 

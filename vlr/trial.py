@@ -107,6 +107,8 @@ class TrialSettings:
         exploration: "random" actions (the paper) or "active" (vlr.active).
         active_model_error: with active exploration, the model's expected error as a
             fraction of each candidate's predicted motion (`ActiveExploration.model_error`).
+        active_criterion: with active exploration, what makes a candidate informative:
+            "spread" or "variance" (`vlr.active`).
         contact_stiffness: the motion model's contact penalty k_c [N/m]
             (`vlr.motion.MotionConfig`); None: its default.
         cone_return: with rolling, the sliding friction coefficient of the return map
@@ -142,6 +144,7 @@ class TrialSettings:
     spin_friction: float = 0.0
     exploration: str = "random"
     active_model_error: float = 0.0
+    active_criterion: str = "spread"
     anneal_stages: int = 1
     contact_stiffness: float | None = None
     cone_return: float | None = None
@@ -243,6 +246,11 @@ class TrialSettings:
             raise UserError(f"exploration {self.exploration!r}: expected random or active")
         if not 0 <= self.active_model_error < 10:
             raise UserError(f"active_model_error {self.active_model_error} must be in [0, 10)")
+        from vlr.active import CRITERIA
+
+        if self.active_criterion not in CRITERIA:
+            raise UserError(f"active_criterion {self.active_criterion!r}: expected one of "
+                            f"{', '.join(CRITERIA)}")
         if isinstance(self.unknowns, str):  # one unknown, not a list of its letters
             object.__setattr__(self, "unknowns", (self.unknowns,))
         if (not isinstance(self.unknowns, list | tuple)
@@ -455,7 +463,8 @@ def identify_config(settings: TrialSettings, model):
     return IdentifyConfig(max_iterations=settings.max_iterations,
                           min_iterations=settings.min_iterations, filter=fcfg,
                           exploration=settings.exploration,
-                          active=ActiveExploration(model_error=float(settings.active_model_error)))
+                          active=ActiveExploration(model_error=float(settings.active_model_error),
+                                                  criterion=settings.active_criterion))
 
 
 @dataclass

@@ -65,6 +65,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--active-model-error", type=float, default=0.0, metavar="KAPPA",
                    help="with --exploration active: weigh the disagreement against the "
                    "model's expected error, KAPPA x each candidate's predicted motion")
+    p.add_argument("--active-criterion", choices=("spread", "variance"), default="spread",
+                   help="with --exploration active: the candidate whose predicted poses "
+                   "spread most (default), or the one that leaves the joint angles the "
+                   "smallest expected posterior spread")
     p.add_argument("--contact-stiffness", type=float, default=None, metavar="K_C",
                    help="the motion model's contact penalty [N/m] (default 1e6)")
     p.add_argument("--cone-return", type=float, default=None, metavar="MU",
@@ -151,7 +155,8 @@ def run(args: argparse.Namespace) -> int:
         nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg,
         rolling=args.rolling, slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, exploration=args.exploration,
-        active_model_error=args.active_model_error, anneal_stages=args.anneal_stages,
+        active_model_error=args.active_model_error,
+        active_criterion=args.active_criterion, anneal_stages=args.anneal_stages,
         contact_stiffness=args.contact_stiffness, cone_return=args.cone_return,
         link_scaling=args.link_scaling, jitter_h=args.jitter_h)
     bar = None
