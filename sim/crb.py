@@ -208,8 +208,9 @@ def format_report(rep: dict) -> str:
 
 def summary_table(reports: list[tuple[str, dict]]) -> str:
     """Markdown, one row per case: the floor after the budget and after the last action (mean
-    +- SD over seeds) at the likelihood's and the camera's scales, the seeds whose floor
-    meets the criterion, and the likelihood scales that would meet it at the budget."""
+    +- SD over the seeds that got there: oracle actions can lose the grasp) at the
+    likelihood's and the camera's scales, the seeds whose floor meets the criterion, and the
+    likelihood scales that would meet it at the budget."""
     cases: dict[str, list[dict]] = {}
     for case, rep in reports:
         cases.setdefault(case, []).append(rep)
@@ -224,10 +225,13 @@ def summary_table(reports: list[tuple[str, dict]]) -> str:
     b = reports[0][1]["budget"] if reports else 15
     lines = [f"| case | floor after {b}, likelihood [deg] | after {b}, camera | after the last "
              "action, likelihood | seeds under the criterion (likelihood / camera) | scales "
-             f"that meet it after {b}, x the likelihood's | unknowns' SD after the last |",
-             "|---|---|---|---|---|---|---|"]
+             f"that meet it after {b}, x the likelihood's | unknowns' SD after the last | "
+             "grasps lost |",
+             "|---|---|---|---|---|---|---|---|"]
     for case, reps in cases.items():
-        last = [r["by_action"][-1]["mean_width_deg"] for r in reps]
+        last = [r["by_action"][-1]["mean_width_deg"] for r in reps if not r["grasp_lost_at"]]
+        lost = [f"seed {r['seed']} at action {r['grasp_lost_at']}" for r in reps
+                if r["grasp_lost_at"]]
         under = sum(r["first_under_target"] is not None for r in reps)
         under_c = sum(r["first_under_target_camera"] is not None for r in reps)
         sds = "; ".join(f"{name} {np.mean([r['unknown_std'][name] for r in reps]):.3g}"
@@ -235,7 +239,8 @@ def summary_table(reports: list[tuple[str, dict]]) -> str:
         lines.append(f"| {case} | {ms([at(r, b, 'mean_width_deg') for r in reps])} | "
                      f"{ms([at(r, b, 'mean_width_deg_camera') for r in reps])} | {ms(last)} | "
                      f"{under}/{len(reps)} / {under_c}/{len(reps)} | "
-                     f"{ms([r['scale_to_meet_at_budget'] for r in reps])} | {sds} |")
+                     f"{ms([r['scale_to_meet_at_budget'] for r in reps])} | {sds} | "
+                     f"{', '.join(lost) or 'none'} |")
     return "\n".join(lines)
 
 
@@ -259,6 +264,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sigma-rot-deg", type=float, default=None)
     p.add_argument("--nominal-theta-deg", type=float, nargs="+", default=None)
     p.add_argument("--prior-spread-deg", type=float, default=None)
+    p.add_argument("--slide-friction", type=float, default=None, metavar="MU",
+                   help="the filter model's pads' sliding friction (as vlr identify)")
+    p.add_argument("--spin-friction", type=float, default=0.0, metavar="MU_T",
+                   help="the filter model's pads' torsional friction [m] (as vlr identify)")
     p.add_argument("--relative-step", type=float, default=0.02,
                    help="finite-difference step over each prior spread (default 0.02)")
     p.add_argument("--json", default=None, metavar="FILE", help="write the report as JSON")
@@ -279,7 +288,8 @@ def _trials(args: argparse.Namespace) -> list[tuple[str, TrialSettings]]:
         max_iterations=args.actions, sigma_pos_mm=args.sigma_pos_mm,
         sigma_rot_deg=args.sigma_rot_deg,
         nominal_theta_deg=tuple(args.nominal_theta_deg) if args.nominal_theta_deg else None,
-        prior_spread_deg=args.prior_spread_deg))]
+        prior_spread_deg=args.prior_spread_deg, slide_friction=args.slide_friction,
+        spin_friction=args.spin_friction))]
 
 
 def _main(args: argparse.Namespace) -> int:
