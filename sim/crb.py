@@ -162,7 +162,7 @@ def crb_report(s: CrbSettings) -> dict:
 def _row(trace, sigma, camera) -> dict:
     b, c = trace.bound(*sigma), trace.bound(*camera)
     return {"actions": trace.actions, "mean_width_deg": b.mean_width_deg,
-            "mean_width_deg_camera": c.mean_width_deg,
+            "mean_width_deg_camera": c.mean_width_deg, "one_sided": trace.one_sided,
             "unknown_std": b.unknown_std.tolist()}
 
 

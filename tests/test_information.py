@@ -121,3 +121,16 @@ def test_crb_cli_bad_json_folder(tmp_path, capsys):
 def test_crb_needs_the_sim():
     with pytest.raises(UserError, match="synthetic"):
         CrbSettings(trial=TrialSettings(backend="synthetic"))
+
+
+def test_a_failed_step_leaves_a_one_sided_difference(synthetic_trace):
+    *_, trace, _ = synthetic_trace
+    st = trace.state.copy()
+    st.valid[1] = False                    # the + step of the first dimension failed
+    central, _ = trace.pose_jacobian()
+    one_sided, _ = trace.pose_jacobian(st)
+    assert np.allclose(one_sided[:, 1:], central[:, 1:])
+    assert np.linalg.norm(one_sided[:, 0] - central[:, 0]) < 0.1 * np.linalg.norm(central[:, 0])
+    st.valid[1 + trace.dims] = False       # and its - step: nothing left to difference
+    with pytest.raises(FloatingPointError, match="both steps of theta:thumb.0"):
+        trace._check(st, np.zeros(st.n, dtype=np.int8), "test")

@@ -133,23 +133,44 @@ class InformationTrace:
         return self.x.size
 
     def _check(self, st: ParticleState, status: np.ndarray, what: str) -> None:
-        if not st.valid.all():
-            bad = [self.pf.dim_names[(i - 1) % self.dims] for i in np.flatnonzero(~st.valid)]
-            codes = sorted({STATUS[int(c)] for c in status[~st.valid]})
-            raise FloatingPointError(
-                f"{what}: {int((~st.valid).sum())} of {st.n} solves failed ({', '.join(codes)})"
-                f"{' at the linearisation point' if not st.valid[0] else ''}; stepped "
-                f"dimensions {', '.join(sorted(set(bad)))}: try a smaller relative_step")
+        """A failed solve of one side of a difference leaves that dimension's one-sided
+        difference (`_pairs`); the linearisation point's, or both sides', is an error."""
+        d = self.dims
+        both = ~st.valid[1:d + 1] & ~st.valid[d + 1:]
+        if st.valid[0] and not both.any():
+            return
+        bad = [self.pf.dim_names[i] for i in np.flatnonzero(both)]
+        codes = sorted({STATUS[int(c)] for c in status[~st.valid]})
+        raise FloatingPointError(
+            f"{what}: {int((~st.valid).sum())} of {st.n} solves failed ({', '.join(codes)})"
+            + (" at the linearisation point" if not st.valid[0] else
+               f"; both steps of {', '.join(bad)}") + ": try a smaller relative_step")
+
+    def _pairs(self, st: ParticleState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per dimension the particles (a, b) whose difference over `span` is its derivative:
+        the central difference, or a one-sided one where a step's solve failed."""
+        d, h = self.dims, self.step_size
+        plus, minus = 1 + np.arange(d), 1 + d + np.arange(d)
+        ok_p, ok_m = st.valid[plus], st.valid[minus]
+        a = np.where(ok_p, plus, 0)
+        b = np.where(ok_m, minus, 0)
+        span = np.where(ok_p & ok_m, 2 * h, h)
+        return a, b, span
 
     def pose_jacobian(self, st: ParticleState | None = None) -> tuple[np.ndarray, np.ndarray]:
         """dy/dv of the POM position [m] and rotation vector [rad], (3, D) each."""
         st = self.state if st is None else st
-        d, h = self.dims, self.step_size
-        plus, minus = slice(1, d + 1), slice(d + 1, 2 * d + 1)
-        jp = (st.pos[plus] - st.pos[minus]).T / (2 * h)
-        rel = np.einsum("pab,pcb->pac", st.rot[plus], st.rot[minus])
-        jr = Rotation.from_matrix(rel).as_rotvec().T / (2 * h)
+        a, b, span = self._pairs(st)
+        jp = (st.pos[a] - st.pos[b]).T / span
+        rel = np.einsum("pab,pcb->pac", st.rot[a], st.rot[b])
+        jr = Rotation.from_matrix(rel).as_rotvec().T / span
         return jp, jr
+
+    @property
+    def one_sided(self) -> int:
+        """Dimensions whose derivative is one-sided now (a step's solve failed)."""
+        d = self.dims
+        return int((self.state.valid[1:d + 1] != self.state.valid[d + 1:]).sum())
 
     def _add(self, st: ParticleState) -> None:
         jp, jr = self.pose_jacobian(st)
@@ -159,9 +180,10 @@ class InformationTrace:
     def output_jacobian(self, st: ParticleState | None = None) -> np.ndarray:
         """(N*K + U, D): d(theta_t, unknowns)/dv at the current state."""
         st = self.state if st is None else st
-        d, h = self.dims, self.step_size
+        d = self.dims
+        a, b, span = self._pairs(st)
         th = st.theta.reshape(st.n, -1)
-        g = (th[1:d + 1] - th[d + 1:]).T / (2 * h)
+        g = (th[a] - th[b]).T / span
         u = len(self.pf.unknowns)
         gu = np.zeros((u, d))
         cols = d - u + np.arange(u)
@@ -199,8 +221,10 @@ class InformationTrace:
         """The bound if the next action went to `command` (the trace unchanged); None if a
         solve failed."""
         st = self.state.copy()
-        self.pf.motion.solve(st, np.asarray(command, float), u_from=self.command)
-        if not st.valid.all():
+        status, _ = self.pf.motion.solve(st, np.asarray(command, float), u_from=self.command)
+        try:
+            self._check(st, status, "preview")
+        except FloatingPointError:
             return None
         jp, jr = self.pose_jacobian(st)
         return self.bound(sigma_pos, sigma_rot, (jp.T @ jp, jr.T @ jr), st)
