@@ -264,6 +264,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sigma-rot-deg", type=float, default=None)
     p.add_argument("--nominal-theta-deg", type=float, nargs="+", default=None)
     p.add_argument("--prior-spread-deg", type=float, default=None)
+    p.add_argument("--action-range-mm", type=float, nargs=2, default=None,
+                   metavar=("LOW", "HIGH"), help="as vlr identify (default 0.2 0.4)")
+    p.add_argument("--action-band-mm", type=float, default=None, metavar="B",
+                   help="as vlr identify (default 0.4)")
     p.add_argument("--slide-friction", type=float, default=None, metavar="MU",
                    help="the filter model's pads' sliding friction (as vlr identify)")
     p.add_argument("--spin-friction", type=float, default=0.0, metavar="MU_T",
@@ -289,7 +293,8 @@ def _trials(args: argparse.Namespace) -> list[tuple[str, TrialSettings]]:
         sigma_rot_deg=args.sigma_rot_deg,
         nominal_theta_deg=tuple(args.nominal_theta_deg) if args.nominal_theta_deg else None,
         prior_spread_deg=args.prior_spread_deg, slide_friction=args.slide_friction,
-        spin_friction=args.spin_friction))]
+        spin_friction=args.spin_friction, action_range_mm=args.action_range_mm,
+        action_band_mm=args.action_band_mm))]
 
 
 def _main(args: argparse.Namespace) -> int:

@@ -176,3 +176,27 @@ def test_contact_stiffness_anneal_stages_and_link_scaling_reach_the_filter():
                        (dict(anneal_stages=2.5), "anneal_stages 2.5")):
         with pytest.raises(UserError, match=match):
             TrialSettings(**bad)
+
+
+def test_the_action_range_reaches_the_identification_and_bad_ones_are_named():
+    from vlr.identify import IdentifyConfig
+    from vlr.kinematics import HandModel
+    from vlr.spec import load_hand
+    from vlr.trial import identify_config
+
+    model = HandModel.from_spec(load_hand("modelo"))
+    default = identify_config(TrialSettings(backend="synthetic", particles=50), model)
+    assert (default.action_range, default.action_band) == (IdentifyConfig.action_range,
+                                                           IdentifyConfig.action_band)
+    wide = identify_config(TrialSettings(backend="synthetic", particles=50,
+                                         action_range_mm=[0.3, 0.6], action_band_mm=0.8),
+                           model)
+    assert wide.action_range == pytest.approx((0.3e-3, 0.6e-3))
+    assert wide.action_band == pytest.approx(0.8e-3)
+    assert TrialSettings(action_range_mm=[0.3, 0.6]).to_dict()["action_range_mm"] == [0.3, 0.6]
+    for bad, match in ((dict(action_range_mm=[0.4, 0.2]), "action_range_mm"),
+                       (dict(action_range_mm=[0.2, 3.0]), "action_range_mm"),
+                       (dict(action_range_mm=0.3), "action_range_mm"),
+                       (dict(action_band_mm=-1.0), "action_band_mm")):
+        with pytest.raises(UserError, match=match):
+            TrialSettings(**bad)

@@ -109,6 +109,10 @@ class TrialSettings:
             fraction of each candidate's predicted motion (`ActiveExploration.model_error`).
         active_criterion: with active exploration, what makes a candidate informative:
             "spread" or "variance" (`vlr.active`).
+        action_range_mm: (low, high) magnitude of each tendon's exploratory change [mm]
+            (`vlr.explore`); None: the identification's 0.2-0.4 mm (4-8 N at 20 N/mm).
+        action_band_mm: commands stay within this of the grasp command [mm]; None: the
+            identification's 0.4 mm (and at least the range's high end).
         contact_stiffness: the motion model's contact penalty k_c [N/m]
             (`vlr.motion.MotionConfig`); None: its default.
         cone_return: with rolling, the sliding friction coefficient of the return map
@@ -145,6 +149,8 @@ class TrialSettings:
     exploration: str = "random"
     active_model_error: float = 0.0
     active_criterion: str = "spread"
+    action_range_mm: tuple[float, float] | None = None
+    action_band_mm: float | None = None
     anneal_stages: int = 1
     contact_stiffness: float | None = None
     cone_return: float | None = None
@@ -203,6 +209,15 @@ class TrialSettings:
         if self.nominal_theta_deg is not None:
             object.__setattr__(self, "nominal_theta_deg",
                                tuple(float(v) for v in self.nominal_theta_deg))
+        if self.action_range_mm is not None:
+            lo, hi = (float(v) for v in self.action_range_mm)
+            if not 0 < lo <= hi <= 2.0:
+                raise UserError(f"action_range_mm {list(self.action_range_mm)} must be [low, "
+                                "high] with 0 < low <= high <= 2 (larger moves drop objects)")
+            object.__setattr__(self, "action_range_mm", (lo, hi))
+        if self.action_band_mm is not None and not (
+                math.isfinite(self.action_band_mm) and self.action_band_mm > 0):
+            raise UserError(f"action_band_mm {self.action_band_mm} must be > 0")
 
     def _check_types(self) -> None:
         """A setting of the wrong type (a sweep file's `particles: many`) is one UserError
@@ -260,6 +275,13 @@ class TrialSettings:
                 or not all(isinstance(k, str) and is_real(v)
                            for k, v in self.true_stiffness.items())):
             raise bad("true_stiffness", "a mapping like {thumb.distal: 0.045}")
+        if self.action_range_mm is not None and (
+                not isinstance(self.action_range_mm, list | tuple)
+                or len(self.action_range_mm) != 2
+                or not all(is_real(v) for v in self.action_range_mm)):
+            raise bad("action_range_mm", "[low, high] in mm")
+        if self.action_band_mm is not None and not is_real(self.action_band_mm):
+            raise bad("action_band_mm", "a number [mm]")
         if self.nominal_theta_deg is not None and (
                 not isinstance(self.nominal_theta_deg, list | tuple)
                 or not all(is_real(v) for v in self.nominal_theta_deg)):
@@ -280,6 +302,8 @@ class TrialSettings:
         d["unknowns"] = list(self.unknowns)
         if self.nominal_theta_deg is not None:
             d["nominal_theta_deg"] = list(self.nominal_theta_deg)
+        if self.action_range_mm is not None:
+            d["action_range_mm"] = list(self.action_range_mm)
         return d
 
     @property
@@ -460,7 +484,12 @@ def identify_config(settings: TrialSettings, model):
                         observation=ObservationModel(sigma_pos=sp * 1e-3,
                                                      sigma_rot=float(np.radians(sr)),
                                                      motion_fraction=settings.sigma_motion))
-    return IdentifyConfig(max_iterations=settings.max_iterations,
+    actions = {}
+    if settings.action_range_mm is not None:
+        actions["action_range"] = tuple(v * 1e-3 for v in settings.action_range_mm)
+    if settings.action_band_mm is not None:
+        actions["action_band"] = settings.action_band_mm * 1e-3
+    return IdentifyConfig(max_iterations=settings.max_iterations, **actions,
                           min_iterations=settings.min_iterations, filter=fcfg,
                           exploration=settings.exploration,
                           active=ActiveExploration(model_error=float(settings.active_model_error),

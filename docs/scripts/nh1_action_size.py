@@ -5,18 +5,15 @@ per action as the Model O's (`vlr gap --object apple --hand nh1`), so this asks 
 larger random actions identify its left finger better. It runs `vlr.trial.run_trial` on the
 NH1 row's settings (the sim, rendered frames, rolling contacts, the user's grasp guess, the
 left finger's two lengths unknown) at a small particle count, with the identification's
-action range and band (`vlr.identify.IdentifyConfig.action_range`, `action_band`: 0.2-0.4
-mm within 0.4 mm by default) replaced, and prints each seed's errors.
+action range and band (`action_range_mm`, `action_band_mm`: 0.2-0.4 mm within 0.4 mm by
+default; `vlr identify --action-range-mm`) replaced, and prints each seed's errors.
 
     python docs/scripts/nh1_action_size.py --range 0.3 0.6 --band 0.6 --seeds 0 1 2
 """
 
 import argparse
-import functools
 
-import vlr.identify
 import vlr.trial
-from vlr.identify import IdentifyConfig
 
 
 def main() -> None:
@@ -33,10 +30,6 @@ def main() -> None:
         p.error(f"--range {lo} {hi} --band {args.band}: need 0 < LOW <= HIGH <= band [mm]")
     if args.particles < 10 or args.actions < 1:
         p.error(f"--particles {args.particles} must be >= 10, --actions {args.actions} >= 1")
-    low, high = lo * 1e-3, hi * 1e-3
-    # `vlr.trial.identify_config` builds its IdentifyConfig from the module at call time.
-    vlr.identify.IdentifyConfig = functools.partial(
-        IdentifyConfig, action_range=(low, high), action_band=args.band * 1e-3)
     print(f"NH1, actions {args.range[0]}-{args.range[1]} mm within {args.band} mm, "
           f"{args.particles} particles, {args.actions} actions")
     print("seed  proximal [deg]  distal [deg]  left proximal link [mm]  pad offset [mm]  "
@@ -46,7 +39,8 @@ def main() -> None:
             backend="sim", object="apple", true_hand="nh1",
             unknowns=("length:left.proximal", "length:left.distal"),
             particles=args.particles, seed=seed, max_iterations=args.actions, rolling=True,
-            nominal_theta_deg=(-10.0, 15.0), prior_spread_deg=10.0)
+            nominal_theta_deg=(-10.0, 15.0), prior_spread_deg=10.0,
+            action_range_mm=(lo, hi), action_band_mm=args.band)
         result = vlr.trial.run_trial(settings)
         if result.get("status", "ok") != "ok" or "errors" not in result:
             print(f"{seed:4d}  {result.get('status')}: {result.get('message', '')}")

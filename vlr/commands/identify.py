@@ -69,6 +69,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --exploration active: the candidate whose predicted poses "
                    "spread most (default), or the one that leaves the joint angles the "
                    "smallest expected posterior spread")
+    p.add_argument("--action-range-mm", type=float, nargs=2, default=None,
+                   metavar=("LOW", "HIGH"), help="magnitude of each tendon's random "
+                   "exploratory change [mm] (default 0.2 0.4: 4-8 N at 20 N/mm)")
+    p.add_argument("--action-band-mm", type=float, default=None, metavar="B",
+                   help="commands stay within B mm of the grasp command (default 0.4)")
     p.add_argument("--contact-stiffness", type=float, default=None, metavar="K_C",
                    help="the motion model's contact penalty [N/m] (default 1e6)")
     p.add_argument("--cone-return", type=float, default=None, metavar="MU",
@@ -158,7 +163,8 @@ def run(args: argparse.Namespace) -> int:
         active_model_error=args.active_model_error,
         active_criterion=args.active_criterion, anneal_stages=args.anneal_stages,
         contact_stiffness=args.contact_stiffness, cone_return=args.cone_return,
-        link_scaling=args.link_scaling, jitter_h=args.jitter_h)
+        link_scaling=args.link_scaling, jitter_h=args.jitter_h,
+        action_range_mm=args.action_range_mm, action_band_mm=args.action_band_mm)
     bar = None
 
     def progress(rec) -> None:
