@@ -120,3 +120,31 @@ def test_the_filter_follows_what_the_world_calls_continuous(modelo):
 def test_bad_world_settings_are_named(kw):
     with pytest.raises(ValueError, match=next(iter(kw))):
         SyntheticConfig(**kw)
+
+
+def test_identification_stops_where_the_hand_reports_the_grasp_lost(modelo):
+    """The VLR assumes a fingertip grasp (Eq. 8): once the hand says it is lost, the run
+    stops before that action's update and says so."""
+    from vlr.hand import ApplyReport
+
+    class Dropping:
+        def __init__(self, world, at):
+            self.world, self.at, self.n = world, at, 0
+
+        def grasp(self):
+            return self.world.grasp()
+
+        def apply(self, delta):
+            self.n += 1
+            u = self.world.apply(delta)
+            return ApplyReport(commands=u, settled=True, grasp_held=self.n < self.at,
+                               message="fingertips ['left'] lost contact")
+
+    world = SyntheticWorld(modelo, OBJ, SyntheticConfig(seed=0))
+    cfg = IdentifyConfig(max_iterations=6, filter=FilterConfig(n_particles=300, seed=0))
+    res = identify(Dropping(world, 3), world.observe, modelo, OBJ, world.nominal, cfg)
+    assert res.grasp_lost_at == 3 and "left" in res.grasp_message
+    assert res.iterations == 2 and len(res.history) == 3  # the grasp's update and two actions
+    held = identify(Dropping(SyntheticWorld(modelo, OBJ, SyntheticConfig(seed=0)), 99),
+                    world.observe, modelo, OBJ, world.nominal, cfg)
+    assert held.grasp_lost_at is None and held.iterations == 6

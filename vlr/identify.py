@@ -113,6 +113,10 @@ class IdentifyResult:
         history: one IterationRecord per filter update.
         scores: per-iteration Score when ground truth was given (else empty).
         seconds: wall time of the filter updates per iteration.
+        grasp_lost_at: the action after which the hand reported the fingertip grasp lost
+            (`vlr.hand.ApplyReport.grasp_held`), None if it held; the run stops there,
+            before that action's update (the model assumes a fingertip grasp).
+        grasp_message: the hand's reason.
     """
 
     converged: bool
@@ -125,6 +129,8 @@ class IdentifyResult:
     history: list[IterationRecord]
     scores: list[Score]
     seconds: list[float]
+    grasp_lost_at: int | None = None
+    grasp_message: str = ""
 
 
 def _commands(report: Any) -> np.ndarray:
@@ -207,6 +213,7 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
 
     after(rec)
     it = 0
+    lost: tuple[int, str] | None = None
     while it < cfg.max_iterations:
         if pf.converged and converged_at is None:
             converged_at = it
@@ -217,7 +224,14 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
             delta = choose_action(pf, action_rng, u, center, explore, cfg.active)
         else:
             delta = random_action(action_rng, u, center, explore)
-        u = _commands(world.apply(delta))
+        report = world.apply(delta)
+        if not getattr(report, "grasp_held", True):
+            # The fingertips no longer hold the object: the VLR's rigid grasp (Eq. 8) does
+            # not hold, and an update would fit the model to a dropped or turned object.
+            lost = (it, str(getattr(report, "message", "")))
+            it -= 1
+            break
+        u = _commands(report)
         obs = observer()
         t0 = time.perf_counter()
         rec = pf.step(u, obs)
@@ -225,7 +239,10 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
         after(rec)
     if pf.converged and converged_at is None:
         converged_at = it
-    return _result(pf, it, converged_at, scores, seconds)
+    res = _result(pf, it, converged_at, scores, seconds)
+    if lost is not None:
+        res.grasp_lost_at, res.grasp_message = lost
+    return res
 
 
 def _result(pf: ParticleFilter, iterations: int, converged_at: int | None,

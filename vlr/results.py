@@ -29,6 +29,7 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
                  "particles": args.particles, "seed": args.seed, "unknowns": args.unknown,
                  "converged": bool(result.converged), "iterations": int(result.iterations),
                  "converged_at": result.converged_at,
+                 "grasp_lost_at": result.grasp_lost_at,
                  "estimates": {name: vars(e) for name, e in result.theta.items()},
                  "unknown_estimates": {name: vars(e) for name, e in result.unknowns.items()},
                  "timing": {"filter_s_per_iteration_median": float(np.median(result.seconds)),

@@ -269,6 +269,7 @@ COLUMNS: list[tuple[str, tuple[str, ...]]] = [
     ("coverage", ("result", "coverage")),
     ("coverage_tolerant", ("result", "coverage_tolerant")),
     ("s_per_iteration", ("result", "timing", "filter_s_per_iteration_median")),
+    ("grasp_lost_at", ("result", "grasp_lost_at")),
 ]
 
 
