@@ -191,3 +191,13 @@ def test_a_grid_setting_splits_the_summary_instead_of_being_averaged(tmp_path):
     assert any(",0.4," in line and "2.00 ± 1.41" in line for line in summary)
     assert any(",0.1," in line and "15.00 ± 7.07" in line for line in summary)
     assert "jitter_h" in (tmp_path / "table.csv").read_text().splitlines()[0]
+
+
+def test_the_summary_counts_lost_grasps():
+    from vlr.sweep import _row, summarize_rows
+
+    recs = [{"case": "c", "status": "ok", "settings": {"seed": s},
+             "result": {"grasp_lost_at": lost}} for s, lost in ((0, None), (1, 3), (2, None))]
+    rows = [_row(r) for r in recs]
+    assert [r["grasp_lost_at"] for r in rows] == [None, 3, None]
+    assert summarize_rows(rows)[0]["grasps lost"] == "1/3"

@@ -381,6 +381,7 @@ def summarize_rows(rows: list[dict[str, Any]],
         s = dict(zip(key_names, ["" if k is None else str(k) for k in key], strict=True))
         s["trials"] = f"{len(ok)}/{len(rs)}"
         s["converged"] = f"{sum(bool(r.get('converged')) for r in ok)}/{len(ok)}"
+        s["grasps lost"] = f"{sum(r.get('grasp_lost_at') is not None for r in ok)}/{len(ok)}"
         for title, col, digits in SUMMARY_COLUMNS:
             s[title] = _fmt([r.get(col) for r in ok], digits)
         extra = sorted({k for r in ok for k in r if k.startswith(("length_mm.",
