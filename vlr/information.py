@@ -11,12 +11,13 @@ actions is
     J_t = P_0^-1 + sum_{s <= t} H_s^T R^-1 H_s,   H_s = dy_s / dx,
     R = diag(sigma_pos^2 I_3, sigma_rot^2 I_3),
 
-P_0 the prior's covariance (the filter's spreads; a uniform unknown's variance). No
-estimator whose posterior is consistent with that likelihood has a covariance of the joint
-angles at t below G_t J_t^-1 G_t^T, G_t = d theta_t / dx (van Trees' inequality,
-linearised at x). The narrowest honest 95% interval of a joint is then 3.92 of its standard
-deviation: the paper's convergence measure (METHOD.md 3) has a floor that depends only on
-the model, the actions and the scales, not on the particle count.
+P_0 the prior's covariance (the filter's spreads; a uniform unknown's variance). The mean
+squared error of any estimate of the joint angles at t, over the observation noise, is at
+least G_t J_t^-1 G_t^T, G_t = d theta_t / dx (van Trees' inequality, linearised at x), so a
+posterior whose 95% intervals hold the truth as often as they claim is not narrower on
+average than 3.92 of those standard deviations: the paper's convergence measure (METHOD.md
+3) has a floor that depends only on the model, the actions and the scales, not on the
+particle count.
 
 Derivatives are central differences over the filter's own motion model, batched as
 particles (1 + 2D of them), each dimension stepped by `relative_step` of its prior
