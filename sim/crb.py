@@ -7,8 +7,9 @@ builds for the same settings: its prior, unknowns and likelihood scales) at the 
 true configuration after the grasp, follows the actions `vlr identify --seed` takes (or,
 with `--candidates`, an oracle that picks each action to narrow the bound the most), and
 reports the Bayesian Cramér-Rao floor of that measure after each action, at the likelihood's
-scales and at the camera's own accuracy. A sim-only tool: it reads ground truth to choose the
-linearisation point; the estimator never runs it.
+scales and at the camera's own accuracy. It needs a world with ground truth, the sim or the
+synthetic world (where the model is the world, so the floor is what a perfect model allows):
+it reads the truth to choose the linearisation point; the estimator never runs it.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ import numpy as np
 
 from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
+from vlr.hand import GraspError
 from vlr.trial import TrialSettings
 
 __all__ = ["CrbSettings", "crb_report", "format_report", "register", "CAMERA_SIGMA"]
@@ -40,7 +42,8 @@ class CrbSettings:
     """One bound: the trial it bounds and the bound's own settings.
 
     Attributes:
-        trial: the trial (`vlr.trial.TrialSettings`, backend "sim"): its object, hands,
+        trial: the trial (`vlr.trial.TrialSettings`, backend "sim" or "synthetic"): its
+            object, hands,
             unknowns, prior, likelihood scales and seed (its actions); `max_iterations` is
             the number of actions. Its particle count does not matter.
         candidates: 0 follows `vlr identify`'s random actions; K > 0 picks each action among
@@ -59,9 +62,9 @@ class CrbSettings:
     budget: int = 15
 
     def __post_init__(self) -> None:
-        if self.trial.backend != "sim":
+        if self.trial.backend not in ("sim", "synthetic"):
             raise UserError(f"backend {self.trial.backend!r}: the bound is linearised at the "
-                            "simulator's true grasp; use the sim")
+                            "true grasp; use the sim or the synthetic world")
         if not isinstance(self.candidates, int) or self.candidates < 0:
             raise UserError(f"candidates {self.candidates!r} must be an integer >= 0")
         if not 0 < self.relative_step < 0.5:
@@ -106,7 +109,7 @@ def crb_report(s: CrbSettings) -> dict:
         pf = ParticleFilter(world.model, world.obj, cfg.filter)
         sigma = (ts.sigma[0] * 1e-3, math.radians(ts.sigma[1]))
         camera = (CAMERA_SIGMA[0] * 1e-3, math.radians(CAMERA_SIGMA[1]))
-        u = np.asarray(world.world.grasp().commands, float)
+        u = _commands(world.world.grasp())
         truth = world.truth()
         trace = InformationTrace(pf, truth_vector(pf, truth), truth.position, truth.rotation,
                                  u, s.relative_step)
@@ -122,11 +125,15 @@ def crb_report(s: CrbSettings) -> dict:
                 delta = _oracle(trace, rng, u, center, explore, s.candidates, sigma)
             else:
                 delta = random_action(rng, u, center, explore)
-            report = world.world.apply(delta)
-            if not report.grasp_held:
+            try:
+                report = world.world.apply(delta)
+            except GraspError:  # the synthetic world refuses a snap-through
                 lost = k
                 break
-            u = np.asarray(report.commands, float)
+            if not getattr(report, "grasp_held", True):
+                lost = k
+                break
+            u = _commands(report)
             trace.act(u)
             rows.append(_row(trace, sigma, camera))
             if k == s.budget:
@@ -157,6 +164,11 @@ def crb_report(s: CrbSettings) -> dict:
         "by_action": rows,
         "seconds": time.perf_counter() - t_start,
     }
+
+
+def _commands(report) -> np.ndarray:
+    """u after a move: an `ApplyReport`'s commands, or the synthetic world's array."""
+    return np.asarray(getattr(report, "commands", report), float)
 
 
 def _row(trace, sigma, camera) -> dict:

@@ -118,9 +118,9 @@ def test_crb_cli_bad_json_folder(tmp_path, capsys):
     assert "folder does not exist" in capsys.readouterr().err
 
 
-def test_crb_needs_the_sim():
-    with pytest.raises(UserError, match="synthetic"):
-        CrbSettings(trial=TrialSettings(backend="synthetic"))
+def test_crb_needs_a_world_with_truth():
+    with pytest.raises(UserError, match="hardware"):
+        CrbSettings(trial=TrialSettings(backend="hardware"))
 
 
 def test_a_failed_step_leaves_a_one_sided_difference(synthetic_trace):
