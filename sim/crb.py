@@ -295,6 +295,8 @@ def _trials(args: argparse.Namespace) -> list[tuple[str, TrialSettings]]:
 
     from vlr.sweep import expand, load_sweep
 
+    if args.actions < 1:
+        raise UserError(f"--actions {args.actions} must be >= 1")
     if args.sweep:
         return [(t.case, replace(t.settings, particles=1000))
                 for t in expand(load_sweep(args.sweep))]
