@@ -138,3 +138,41 @@ def test_active_variance_identification_runs_end_to_end():
     assert r["iterations"] >= 1 and np.isfinite(r["errors"]["proximal_deg_mean"])
     with pytest.raises(UserError, match="criterion"):
         TrialSettings(exploration="active", active_criterion="entropy")
+
+
+def test_the_force_screen_needs_rolling_and_runs_end_to_end():
+    r = run_trial(TrialSettings(backend="synthetic", particles=300, seed=0, max_iterations=2,
+                                rolling=True, exploration="active",
+                                active_criterion="variance", active_min_force_n=0.05))
+    assert r["iterations"] >= 1 and np.isfinite(r["errors"]["proximal_deg_mean"])
+    with pytest.raises(UserError, match="rolling"):
+        TrialSettings(backend="synthetic", rolling=False, active_min_force_n=0.05)
+    with pytest.raises(ValueError, match="min_normal_force"):
+        ActiveExploration(min_normal_force=-1.0)
+
+
+def test_the_force_screen_passes_over_a_candidate_that_parts_a_contact(monkeypatch):
+    """Candidates after which a finger's predicted normal force falls under the screen's are
+    not taken, whatever their information; if all are, the one that keeps the most force."""
+    import vlr.active as active
+    from vlr.filter import ParticleFilter
+    from vlr.trial import identify_config, open_world
+
+    ts = TrialSettings(backend="synthetic", particles=200, seed=0, rolling=True)
+    world = open_world(ts)
+    pf = ParticleFilter(world.model, world.obj, identify_config(ts, world.model).filter)
+    u = np.asarray(world.world.grasp(), float)
+    pf.initialize(world.observer(), u, world.nominal.theta, world.nominal.contact)
+    explore = ExplorationRange(2e-4, 4e-4, 4e-4)
+    settings = ActiveExploration(candidates=3, subset=50, min_normal_force=0.05)
+    draw = np.random.default_rng(5)  # the candidates choose_action draws from the same seed
+    cands = [random_action(draw, u, u, explore) for _ in range(3)]
+
+    def choose_with(forces: list[float]) -> np.ndarray:
+        calls = iter(forces)
+        monkeypatch.setattr(active, "_normal_forces",
+                            lambda pf_, st: np.full((st.n, 3), next(calls)))
+        return choose_action(pf, np.random.default_rng(5), u, u, explore, settings)
+
+    np.testing.assert_allclose(choose_with([0.0, 0.01, 1.0]), cands[2])
+    np.testing.assert_allclose(choose_with([0.0, 0.03, 0.01]), cands[1])  # all under: safest

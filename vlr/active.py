@@ -15,6 +15,12 @@ that a choice costs `candidates` solves of `subset` particles:
   convergence measure (METHOD.md 3) is the 95% interval of. `vlr crb --candidates` showed
   that choosing among random candidates by that measure (with the truth known) halves the
   floor of the intervals on the apple, wine glass and toy block (docs/RESULTS.md 5).
+
+The most informative actions lie near a fold of the grasp, where a fingertip may leave the
+object (the gelatin box's seed 0 loses its left fingertip to the first active action). With
+`min_normal_force` > 0 (rolling contacts), a candidate after which some finger's predicted
+normal force (`MotionModel.normal_forces`, median over the subset) falls under it is passed
+over; if every candidate is, the one whose weakest finger keeps the most force is taken.
 """
 
 from __future__ import annotations
@@ -45,12 +51,16 @@ class ActiveExploration:
             model predicts worst, is not chosen for its size alone. 0 = the likelihood's
             fixed scales (the choice measured on the synthetic world).
         criterion: "spread" or "variance" (module docstring).
+        min_normal_force: [N] pass over a candidate after which a finger's median predicted
+            normal force falls under this (module docstring); 0 = no screen. Needs rolling
+            contacts in the motion model.
     """
 
     candidates: int = 8
     subset: int = 256
     model_error: float = 0.0
     criterion: str = "spread"
+    min_normal_force: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("candidates", "subset"):
@@ -61,6 +71,11 @@ class ActiveExploration:
                 or not 0 <= self.model_error < 10):
             raise ValueError(f"active exploration model_error {self.model_error!r} must be a "
                              "number in [0, 10)")
+        if (isinstance(self.min_normal_force, bool)
+                or not isinstance(self.min_normal_force, int | float)
+                or not 0 <= self.min_normal_force < 100):
+            raise ValueError(f"active exploration min_normal_force {self.min_normal_force!r} "
+                             "must be a number of newtons in [0, 100)")
         if self.criterion not in CRITERIA:
             raise ValueError(f"active exploration criterion {self.criterion!r}: expected one "
                              f"of {', '.join(CRITERIA)}")
@@ -114,12 +129,22 @@ def choose_action(pf, rng: np.random.Generator, commands: np.ndarray, center: np
     idx = rng.choice(valid, size=min(settings.subset, len(valid)), replace=False)
     base = pf.state.take(idx)
     obs = pf.config.observation
+    screen = settings.min_normal_force > 0
+    if screen and not pf.motion.config.rolling:
+        raise ValueError("active exploration's min_normal_force needs rolling contacts")
     best, best_score = cands[0], -np.inf
+    safest, safest_force = cands[0], -np.inf
     k = settings.model_error
     for delta in cands:
         st = base.copy()
         pf.motion.solve(st, commands + delta, u_from=commands)
         ok = st.valid
+        if screen and ok.any():
+            weakest = float(np.median(_normal_forces(pf, st)[ok], axis=0).min())
+            if weakest > safest_force:
+                safest, safest_force = delta, weakest
+            if weakest < settings.min_normal_force:
+                continue
         sp, sr = obs.sigma_pos, obs.sigma_rot
         if k > 0 and ok.any():
             moved = np.linalg.norm(st.pos[ok] - base.pos[ok], axis=-1).mean()
@@ -132,4 +157,14 @@ def choose_action(pf, rng: np.random.Generator, commands: np.ndarray, center: np
             score = prediction_spread(st.pos[ok], st.rot[ok], sp, sr)
         if score > best_score:
             best, best_score = delta, score
+    if screen and best_score == -np.inf:
+        return safest
     return best
+
+
+def _normal_forces(pf, st) -> np.ndarray:
+    """(P, N) each contact's predicted normal force [N] (`MotionModel.normal_forces`)."""
+    from vlr.surface import surface_normals
+
+    m = surface_normals(pf.model, st.theta, st.normals, st.rot)
+    return pf.motion.normal_forces(st, pf.motion.rolling_frames(st, m)[..., :3])

@@ -109,6 +109,9 @@ class TrialSettings:
             fraction of each candidate's predicted motion (`ActiveExploration.model_error`).
         active_criterion: with active exploration, what makes a candidate informative:
             "spread" or "variance" (`vlr.active`).
+        active_min_force_n: with active exploration, pass over a candidate after which a
+            finger's predicted normal force falls under this [N]
+            (`ActiveExploration.min_normal_force`); 0: no screen. Needs rolling.
         action_range_mm: (low, high) magnitude of each tendon's exploratory change [mm]
             (`vlr.explore`); None: the identification's 0.2-0.4 mm (4-8 N at 20 N/mm).
         action_band_mm: commands stay within this of the grasp command [mm]; None: the
@@ -149,6 +152,7 @@ class TrialSettings:
     exploration: str = "random"
     active_model_error: float = 0.0
     active_criterion: str = "spread"
+    active_min_force_n: float = 0.0
     action_range_mm: tuple[float, float] | None = None
     action_band_mm: float | None = None
     anneal_stages: int = 1
@@ -242,6 +246,7 @@ class TrialSettings:
                 raise bad(name, "an integer")
         for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg", "sigma_motion",
                      "slide_friction", "spin_friction", "active_model_error",
+                     "active_min_force_n",
                      "contact_stiffness", "cone_return"):
             v = getattr(self, name)
             if not (is_real(v) or (v is None and name in ("sigma_pos_mm", "sigma_rot_deg",
@@ -261,6 +266,12 @@ class TrialSettings:
             raise UserError(f"exploration {self.exploration!r}: expected random or active")
         if not 0 <= self.active_model_error < 10:
             raise UserError(f"active_model_error {self.active_model_error} must be in [0, 10)")
+        if not 0 <= self.active_min_force_n < 100:
+            raise UserError(f"active_min_force_n {self.active_min_force_n} must be in "
+                            "[0, 100)")
+        if self.active_min_force_n and not self.uses_rolling:
+            raise UserError("active_min_force_n screens the rolling contacts' normal forces: "
+                            "set rolling too")
         from vlr.active import CRITERIA
 
         if self.active_criterion not in CRITERIA:
@@ -493,7 +504,9 @@ def identify_config(settings: TrialSettings, model):
                           min_iterations=settings.min_iterations, filter=fcfg,
                           exploration=settings.exploration,
                           active=ActiveExploration(model_error=float(settings.active_model_error),
-                                                  criterion=settings.active_criterion))
+                                                  criterion=settings.active_criterion,
+                                                  min_normal_force=float(
+                                                      settings.active_min_force_n)))
 
 
 @dataclass

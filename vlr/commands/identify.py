@@ -69,6 +69,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with --exploration active: the candidate whose predicted poses "
                    "spread most (default), or the one that leaves the joint angles the "
                    "smallest expected posterior spread")
+    p.add_argument("--active-min-force", type=float, default=0.0, metavar="N",
+                   help="with --exploration active and rolling contacts: pass over a "
+                   "candidate after which a finger's predicted normal force falls under N "
+                   "newtons (default 0: no screen)")
     p.add_argument("--action-range-mm", type=float, nargs=2, default=None,
                    metavar=("LOW", "HIGH"), help="magnitude of each tendon's random "
                    "exploratory change [mm] (default 0.2 0.4: 4-8 N at 20 N/mm)")
@@ -161,7 +165,8 @@ def run(args: argparse.Namespace) -> int:
         rolling=args.rolling, slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, exploration=args.exploration,
         active_model_error=args.active_model_error,
-        active_criterion=args.active_criterion, anneal_stages=args.anneal_stages,
+        active_criterion=args.active_criterion, active_min_force_n=args.active_min_force,
+        anneal_stages=args.anneal_stages,
         contact_stiffness=args.contact_stiffness, cone_return=args.cone_return,
         link_scaling=args.link_scaling, jitter_h=args.jitter_h,
         action_range_mm=args.action_range_mm, action_band_mm=args.action_band_mm)
