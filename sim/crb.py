@@ -23,7 +23,7 @@ import numpy as np
 
 from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
-from vlr.hand import GraspError
+from vlr.hand import GraspError, report_commands
 from vlr.trial import TrialSettings
 
 __all__ = ["CrbSettings", "crb_report", "format_report", "register", "CAMERA_SIGMA"]
@@ -80,13 +80,15 @@ class CrbSettings:
 
 
 def _scale_for(trace, sigma: tuple[float, float], target: float) -> float:
-    """The factor c for which scales c * sigma just give a mean width of `target` now."""
+    """The factor c for which scales c * sigma just give a mean width of `target` now: nan
+    if no scales do (the prior's width left by unobserved directions stays above it), inf if
+    any do."""
     def width(c: float) -> float:
         return trace.bound(c * sigma[0], c * sigma[1]).mean_width_deg
 
     lo, hi = 1e-3, 1e3
     if width(lo) > target:
-        return 0.0
+        return math.nan
     if width(hi) < target:
         return math.inf
     for _ in range(60):
@@ -109,7 +111,7 @@ def crb_report(s: CrbSettings) -> dict:
         pf = ParticleFilter(world.model, world.obj, cfg.filter)
         sigma = (ts.sigma[0] * 1e-3, math.radians(ts.sigma[1]))
         camera = (CAMERA_SIGMA[0] * 1e-3, math.radians(CAMERA_SIGMA[1]))
-        u = _commands(world.world.grasp())
+        u = report_commands(world.world.grasp())
         truth = world.truth()
         trace = InformationTrace(pf, truth_vector(pf, truth), truth.position, truth.rotation,
                                  u, s.relative_step)
@@ -133,7 +135,7 @@ def crb_report(s: CrbSettings) -> dict:
             if not getattr(report, "grasp_held", True):
                 lost = k
                 break
-            u = _commands(report)
+            u = report_commands(report)
             trace.act(u)
             rows.append(_row(trace, sigma, camera))
             if k == s.budget:
@@ -164,11 +166,6 @@ def crb_report(s: CrbSettings) -> dict:
         "by_action": rows,
         "seconds": time.perf_counter() - t_start,
     }
-
-
-def _commands(report) -> np.ndarray:
-    """u after a move: an `ApplyReport`'s commands, or the synthetic world's array."""
-    return np.asarray(getattr(report, "commands", report), float)
 
 
 def _row(trace, sigma, camera) -> dict:
@@ -209,7 +206,11 @@ def format_report(rep: dict) -> str:
     lines.append(f"under {t} deg: at action {rep['first_under_target']} (likelihood), "
                  f"{rep['first_under_target_camera']} (camera)")
     c = rep["scale_to_meet_at_budget"]
-    if c is not None:
+    if c is not None and not math.isfinite(c):
+        lines.append(f"after {rep['budget']} actions "
+                     + ("no scales bring it under " if math.isnan(c) else "any scales keep it "
+                        "under ") + f"{t} deg")
+    elif c is not None:
         lines.append(f"to be under {t} deg after {rep['budget']} actions the scales must be "
                      f"at most {c:.2f}x the likelihood's: {c * rep['sigma_pos_mm']:.3f} mm / "
                      f"{c * rep['sigma_rot_deg']:.3f} deg")
@@ -321,20 +322,29 @@ def _main(args: argparse.Namespace) -> int:
     settings = [(case, CrbSettings(trial=t, candidates=args.candidates,
                                    relative_step=args.relative_step))
                 for case, t in _trials(args)]
-    reports = []
+    reports, failed = [], []
     for case, s in settings:
         try:
             rep = crb_report(s)
         except FloatingPointError as exc:
-            raise UserError(f"{case}, seed {s.trial.seed}: the bound could not be "
-                            f"linearised: {exc}") from None
+            msg = f"{case}, seed {s.trial.seed}: the bound could not be linearised: {exc}"
+            if not args.sweep:
+                raise UserError(msg) from None
+            # One trial's model that cannot be differenced does not void the sweep's others.
+            print(f"skipped: {msg}\n", flush=True)
+            failed.append({"case": case, "seed": s.trial.seed, "error": str(exc)})
+            continue
         print(format_report(rep) + "\n", flush=True)
         reports.append((case, rep))
     if args.sweep:
         print(summary_table(reports))
+        if failed:
+            print(f"{len(failed)} trial(s) skipped: "
+                  + "; ".join(f"{f['case']} seed {f['seed']}" for f in failed))
     if args.json:
         write_json_atomic(args.json, reports[0][1] if not args.sweep else
                           {"sweep": args.sweep, "trials": [{"case": c, **r}
-                                                           for c, r in reports]})
+                                                           for c, r in reports],
+                           "skipped": failed})
         print(f"wrote {args.json}")
     return 0

@@ -146,15 +146,8 @@ def record_actions(settings: GapSettings) -> Recording:
 
 
 def _state(model: HandModel, truth) -> ParticleState:
-    """One particle at the true configuration (contacts on the pad spheres, the anchors
-    from the true contacts and POM pose)."""
-    st = ParticleState.nominal(model, 1, truth.theta, truth.normals, truth.position,
-                               truth.rotation)
-    st.segments[0] = truth.segments
-    st.stiffness[0] = truth.stiffness
-    st.tendon[0] = truth.tendon
-    st.anchor_to_pose(model)
-    return st
+    """One particle at the true configuration (`ParticleState.at_truth`)."""
+    return ParticleState.at_truth(model, truth)
 
 
 def _angle_deg(r: np.ndarray) -> float:

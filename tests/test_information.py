@@ -134,3 +134,16 @@ def test_a_failed_step_leaves_a_one_sided_difference(synthetic_trace):
     st.valid[1 + trace.dims] = False       # and its - step: nothing left to difference
     with pytest.raises(FloatingPointError, match="both steps of theta:thumb.0"):
         trace._check(st, np.zeros(st.n, dtype=np.int8), "test")
+
+
+def test_the_scales_that_meet_the_criterion_are_found_or_said_to_be_none():
+    from types import SimpleNamespace
+
+    from sim.crb import _scale_for
+
+    def trace(floor: float):  # width = floor + 4 x the scale factor, as a bound behaves
+        return SimpleNamespace(bound=lambda sp, sr: SimpleNamespace(
+            mean_width_deg=floor + 4.0 * sp / 1e-3))
+
+    assert _scale_for(trace(0.0), (1e-3, 0.01), 2.0) == pytest.approx(0.5, rel=1e-6)
+    assert np.isnan(_scale_for(trace(3.0), (1e-3, 0.01), 2.0))  # the prior alone is wider

@@ -88,7 +88,7 @@ def prediction_spread(pos: np.ndarray, rot: np.ndarray, sigma_pos: float,
     sigma_rot^2 (Eq. 5's scales)."""
     if len(pos) < 2:
         return 0.0
-    rel = Rotation.from_matrix(np.einsum("ba,pbc->pac", rot[0], rot)).as_rotvec()
+    rel = _rotvecs(rot)
     return float(pos.var(axis=0).sum() / sigma_pos**2 + rel.var(axis=0).sum() / sigma_rot**2)
 
 

@@ -85,6 +85,12 @@ class CommandError(ValueError):
     """A tendon command is non-finite, has the wrong shape, or is out of range."""
 
 
+def report_commands(report) -> np.ndarray:
+    """The tendon commands u [m] after a move: an `ApplyReport`'s, or the array a world that
+    reports nothing else returns (`vlr.synthetic.SyntheticWorld.apply`)."""
+    return np.asarray(getattr(report, "commands", report), dtype=float)
+
+
 def check_delta(delta: np.ndarray, n_fingers: int, max_step: float) -> np.ndarray:
     """Validate a tendon change: finite, one per finger, each |delta| <= max_step [m]."""
     arr = np.asarray(delta, dtype=float)

@@ -24,7 +24,7 @@ import numpy as np
 from vlr.active import ActiveExploration, choose_action
 from vlr.explore import ExplorationRange, random_action
 from vlr.filter import FilterConfig, IterationRecord, ParticleFilter
-from vlr.hand import GraspError
+from vlr.hand import GraspError, report_commands
 from vlr.kinematics import HandModel, contact_in_distal, normals_from_angles
 from vlr.motion import ObjectParams
 from vlr.observation import PoseObservation
@@ -133,10 +133,6 @@ class IdentifyResult:
     grasp_message: str = ""
 
 
-def _commands(report: Any) -> np.ndarray:
-    return np.asarray(getattr(report, "commands", report), dtype=float)
-
-
 def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
     post = rec.posterior or rec.prior
     n_th = pf.model.n_fingers * pf.model.n_joints
@@ -184,7 +180,7 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
     pf = ParticleFilter(model, obj, cfg.filter)
     action_rng = np.random.default_rng(cfg.filter.seed + 1 if cfg.action_seed is None
                                        else cfg.action_seed)
-    u = _commands(world.grasp())
+    u = report_commands(world.grasp())
     center = u.copy()
     explore = ExplorationRange(low=cfg.action_range[0], high=cfg.action_range[1],
                                band=max(cfg.action_band, cfg.action_range[1]))
@@ -231,7 +227,7 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
             lost = (it, str(getattr(report, "message", "")))
             it -= 1
             break
-        u = _commands(report)
+        u = report_commands(report)
         obs = observer()
         t0 = time.perf_counter()
         rec = pf.step(u, obs)

@@ -62,12 +62,7 @@ def truth_vector(pf: ParticleFilter, truth) -> np.ndarray:
     """(D,) the filter's sampled dimensions at a true state (`vlr.synthetic.Truth` or the
     sim's): joint angles, pad contacts and the unknowns' true values. For bounds only: the
     filter itself never sees it."""
-    st = ParticleState.nominal(pf.model, 1, truth.theta, truth.normals, truth.position,
-                               truth.rotation)
-    st.segments[0] = truth.segments
-    st.stiffness[0] = truth.stiffness
-    st.tendon[0] = truth.tendon
-    return pf.pack(st)[0]
+    return pf.pack(ParticleState.at_truth(pf.model, truth))[0]
 
 
 @dataclass(frozen=True)

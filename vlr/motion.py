@@ -305,6 +305,19 @@ class ParticleState:
         st.anchor_to_pose(model)
         return st
 
+    @classmethod
+    def at_truth(cls, model: HandModel, truth) -> ParticleState:
+        """One particle at a true state (`vlr.synthetic.Truth` or the sim's): its joint
+        angles, pad contacts, POM pose and physical parameters (segments, stiffness, tendon),
+        the anchors from the true contacts and pose. For diagnostics and scoring
+        (`vlr gap`, `vlr crb`), never for the filter."""
+        st = cls.nominal(model, 1, truth.theta, truth.normals, truth.position, truth.rotation)
+        st.segments[0] = truth.segments
+        st.stiffness[0] = truth.stiffness
+        st.tendon[0] = truth.tendon
+        st.anchor_to_pose(model)
+        return st
+
     def contacts(self, model: HandModel) -> np.ndarray:
         """(P, N, 3) contact points in the palm frame by forward kinematics (Eq. 2)."""
         return contact_points(model, self.theta, self.normals, self.segments)
