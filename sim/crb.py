@@ -79,12 +79,17 @@ class CrbSettings:
         return self.trial.max_iterations
 
 
-def _scale_for(trace, sigma: tuple[float, float], target: float) -> float:
+def _bound(trace, sigma: tuple[float, float, float]):
+    """The trace's bound at scales (sigma_pos [m], sigma_rot [rad], sigma_turn [rad])."""
+    return trace.bound(sigma[0], sigma[1], sigma_turn=sigma[2])
+
+
+def _scale_for(trace, sigma: tuple[float, float, float], target: float) -> float:
     """The factor c for which scales c * sigma just give a mean width of `target` now: nan
     if no scales do (the prior's width left by unobserved directions stays above it), inf if
     any do."""
     def width(c: float) -> float:
-        return trace.bound(c * sigma[0], c * sigma[1]).mean_width_deg
+        return _bound(trace, tuple(c * x for x in sigma)).mean_width_deg
 
     lo, hi = 1e-3, 1e3
     if width(lo) > target:
@@ -109,8 +114,9 @@ def crb_report(s: CrbSettings) -> dict:
     try:
         cfg = identify_config(ts, world.model)
         pf = ParticleFilter(world.model, world.obj, cfg.filter)
-        sigma = (ts.sigma[0] * 1e-3, math.radians(ts.sigma[1]))
-        camera = (CAMERA_SIGMA[0] * 1e-3, math.radians(CAMERA_SIGMA[1]))
+        sigma = (ts.sigma[0] * 1e-3, math.radians(ts.sigma[1]),
+                 math.radians(ts.sigma_turn_deg))
+        camera = (CAMERA_SIGMA[0] * 1e-3, math.radians(CAMERA_SIGMA[1]), 0.0)
         u = report_commands(world.world.grasp())
         truth = world.truth()
         trace = InformationTrace(pf, truth_vector(pf, truth), truth.position, truth.rotation,
@@ -140,7 +146,7 @@ def crb_report(s: CrbSettings) -> dict:
             rows.append(_row(trace, sigma, camera))
             if k == s.budget:
                 scale_at_budget = _scale_for(trace, sigma, s.target_deg)
-        last = trace.bound(*sigma)
+        last = _bound(trace, sigma)
     finally:
         world.close()
 
@@ -152,6 +158,7 @@ def crb_report(s: CrbSettings) -> dict:
         "unknowns": list(ts.unknowns), "seed": ts.seed,
         "actions": "oracle" if s.candidates else "random", "candidates": s.candidates,
         "sigma_pos_mm": ts.sigma[0], "sigma_rot_deg": ts.sigma[1],
+        "sigma_turn_deg": ts.sigma_turn_deg,
         "camera_sigma": list(CAMERA_SIGMA), "prior_spread_deg": ts.grasp_guess[1],
         "relative_step": s.relative_step, "target_deg": s.target_deg,
         "grasp_lost_at": lost,
@@ -169,7 +176,7 @@ def crb_report(s: CrbSettings) -> dict:
 
 
 def _row(trace, sigma, camera) -> dict:
-    b, c = trace.bound(*sigma), trace.bound(*camera)
+    b, c = _bound(trace, sigma), _bound(trace, camera)
     return {"actions": trace.actions, "mean_width_deg": b.mean_width_deg,
             "mean_width_deg_camera": c.mean_width_deg, "one_sided": trace.one_sided,
             "unknown_std": b.unknown_std.tolist()}
@@ -181,7 +188,7 @@ def _oracle(trace, rng, u, center, explore, k: int, sigma) -> np.ndarray:
     cands = [random_action(rng, u, center, explore) for _ in range(k)]
     best, best_w = cands[0], math.inf
     for d in cands:
-        b = trace.preview(u + d, *sigma)
+        b = trace.preview(u + d, sigma[0], sigma[1], sigma[2])
         if b is not None and b.mean_width_deg < best_w:
             best, best_w = d, b.mean_width_deg
     return best
@@ -194,7 +201,9 @@ def format_report(rep: dict) -> str:
     head = (f"{who}, seed {rep['seed']}, {rep['actions']} actions"
             + (f" of {rep['candidates']} candidates" if rep["candidates"] else "")
             + f": floor of the mean 95% joint interval [deg] at the likelihood's "
-            f"{rep['sigma_pos_mm']} mm / {rep['sigma_rot_deg']} deg and at the camera's "
+            f"{rep['sigma_pos_mm']} mm / {rep['sigma_rot_deg']} deg"
+            + (f" + a {rep['sigma_turn_deg']} deg turn" if rep.get("sigma_turn_deg") else "")
+            + " and at the camera's "
             f"{rep['camera_sigma'][0]} mm / {rep['camera_sigma'][1]} deg")
     lines = [head, f"{'actions':>8s} {'likelihood':>11s} {'camera':>8s}"
              + "".join(f" {'sd ' + n:>26s}" for n in rep["unknown_std"])]
@@ -213,7 +222,9 @@ def format_report(rep: dict) -> str:
     elif c is not None:
         lines.append(f"to be under {t} deg after {rep['budget']} actions the scales must be "
                      f"at most {c:.2f}x the likelihood's: {c * rep['sigma_pos_mm']:.3f} mm / "
-                     f"{c * rep['sigma_rot_deg']:.3f} deg")
+                     f"{c * rep['sigma_rot_deg']:.3f} deg"
+                     + (f" / a {c * rep['sigma_turn_deg']:.3f} deg turn"
+                        if rep.get("sigma_turn_deg") else ""))
     if rep["grasp_lost_at"]:
         lines.append(f"grasp lost at action {rep['grasp_lost_at']}")
     return "\n".join(lines)
@@ -275,6 +286,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "vlr identify's random actions)")
     p.add_argument("--sigma-pos-mm", type=float, default=None)
     p.add_argument("--sigma-rot-deg", type=float, default=None)
+    p.add_argument("--sigma-turn", type=float, default=0.0, metavar="DEG",
+                   help="the likelihood's turn term (vlr identify --sigma-turn)")
     p.add_argument("--nominal-theta-deg", type=float, nargs="+", default=None)
     p.add_argument("--prior-spread-deg", type=float, default=None)
     p.add_argument("--action-range-mm", type=float, nargs=2, default=None,
@@ -305,7 +318,7 @@ def _trials(args: argparse.Namespace) -> list[tuple[str, TrialSettings]]:
         backend="sim", object=args.object, hand=args.hand, true_hand=args.true_hand,
         unknowns=tuple(args.unknown), seed=args.seed, particles=1000,
         max_iterations=args.actions, sigma_pos_mm=args.sigma_pos_mm,
-        sigma_rot_deg=args.sigma_rot_deg,
+        sigma_rot_deg=args.sigma_rot_deg, sigma_turn_deg=args.sigma_turn,
         nominal_theta_deg=tuple(args.nominal_theta_deg) if args.nominal_theta_deg else None,
         prior_spread_deg=args.prior_spread_deg, slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, action_range_mm=args.action_range_mm,

@@ -13,7 +13,10 @@ the TRUE hand parameters, so that what remains is the model's own error:
 * open-loop drift: all actions predicted in sequence from the first true state, never
   refreshed; the tag's error at the end over the total true motion (`drift_ratio`), and
   the per-action ratios along that path (`open_loop_ratio_*`: the model carrying its own
-  contact loads and places from action to action, as a filter's particle does).
+  contact loads and places from action to action, as a filter's particle does);
+* the turn (`turn`): each per-action error split into the object's turn about the grasp's
+  axis (`vlr.observation.grasp_turn`) and the rest, position and orientation: the scales of
+  the likelihood's `sigma_turn` and of its base.
 
 Each model term is switched on in turn (`LADDER`), so each one's share is a measured figure.
 This is a sim-only tool (it reads ground truth); the estimator never runs it.
@@ -33,6 +36,7 @@ from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
 from vlr.kinematics import HandModel
 from vlr.motion import STATUS, MotionConfig, MotionModel, ObjectParams, ParticleState
+from vlr.observation import grasp_turn, rotation_error
 
 __all__ = ["LADDER", "GapSettings", "record_actions", "measure_gap", "gap_report", "register"]
 
@@ -168,6 +172,30 @@ def _motion_error(p0, r0, p1, r1, t0, t1) -> tuple[float, float, float, float]:
             float(np.linalg.norm(dp_true)), _angle_deg(dr_true))
 
 
+def _turn_split(v: np.ndarray, p0, r0, p1, r1, t0, t1) -> tuple[float, float, float]:
+    """The error of a predicted motion split along the grasp's turn v (6,) [m/rad, rad/rad]
+    (module docstring): the turn's error [deg] and what is left, position [mm] and
+    orientation [deg]."""
+    e_p = (p1 - p0) - (t1.position - t0.position)
+    e_r = rotation_error((r1 @ r0.T) @ (t1.rotation @ t0.rotation.T).T, np.eye(3))
+    turn = float(e_r @ v[3:])
+    return (math.degrees(turn), float(np.linalg.norm(e_p - turn * v[:3])) * 1e3,
+            math.degrees(float(np.linalg.norm(e_r - turn * v[3:]))))
+
+
+def _turn_summary(rows: list[dict]) -> dict:
+    """RMS over the actions of the per-action errors and of their split (`_turn_split`)."""
+    def rms(key: str) -> float:
+        v = np.array([r[key] for r in rows], dtype=float)
+        return float(np.sqrt(np.mean(v ** 2))) if v.size else math.nan
+
+    return {"turn_error_deg_rms": rms("turn_error_deg"),
+            "rest_position_mm_rms": rms("rest_position_mm"),
+            "rest_orientation_deg_rms": rms("rest_orientation_deg"),
+            "position_mm_rms": rms("error_position_mm"),
+            "orientation_deg_rms": rms("error_orientation_deg")}
+
+
 def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
                 friction: str = "") -> dict:
     """Per-action, static and drift gap of the motion model with `terms` (module docstring),
@@ -177,6 +205,7 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
         raise ValueError(f"friction {friction!r}: expected '', 'cone' or 'friction'")
     model = HandModel.from_spec(rec.hand_spec)
     obj = ObjectParams.from_spec(rec.object_spec)
+    thumb = model.finger_index("thumb") if "thumb" in model.names else 0
     cfg = MotionConfig(terms=terms, rolling_substeps=settings.rolling_substeps,
                        spin_stiffness=settings.spin_stiffness,
                        contact_stiffness=settings.contact_stiffness)
@@ -194,6 +223,7 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
         st = _state(model, t0)
         status, _ = motion.solve(st, rec.commands[k], settle)
         p0, r0 = _pose(st)
+        v = grasp_turn(st.pos, st.rot, st.anchors, thumb)[0]
         static.append((float(np.linalg.norm(p0 - t0.position)),
                        _angle_deg(r0 @ t0.rotation.T),
                        float(np.degrees(np.abs(st.theta[0] - t0.theta)).mean())))
@@ -201,9 +231,12 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
         ok = bool(st.valid[0])
         p1, r1 = _pose(st)
         e_p, e_r, m_p, m_r = _motion_error(p0, r0, p1, r1, t0, t1)
+        turn, rest_p, rest_r = _turn_split(v, p0, r0, p1, r1, t0, t1)
         rows.append({"action": k + 1, "ok": ok, "status": STATUS[int(status[0])],
                      "newton_iterations": int(iters[0]), "error_position_mm": e_p * 1e3,
-                     "error_orientation_deg": e_r, "motion_position_mm": m_p * 1e3,
+                     "error_orientation_deg": e_r, "turn_error_deg": turn,
+                     "rest_position_mm": rest_p, "rest_orientation_deg": rest_r,
+                     "motion_position_mm": m_p * 1e3,
                      "motion_orientation_deg": m_r,
                      "ratio_position": e_p / m_p if m_p > 0 else math.nan,
                      "ratio_orientation": e_r / m_r if m_r > 0 else math.nan})
@@ -226,6 +259,7 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
         "error_position_mm_mean": stat("error_position_mm", np.mean),
         "error_orientation_deg_mean": stat("error_orientation_deg", np.mean),
         **drift,
+        "turn": _turn_summary(ok_rows),
         "static": {"position_mm_mean": float(s[:, 0].mean() * 1e3),
                    "orientation_deg_mean": float(s[:, 1].mean()),
                    "joint_deg_mean": float(s[:, 2].mean())},
@@ -328,6 +362,15 @@ def format_report(rep: dict) -> str:
                      + (f"  ({c['failed_solves']} failed solves)" if c["failed_solves"] else ""))
     lines.append("open pos / ori: the per-action ratios along the open-loop path of the drift "
                  "(the model carrying its own state, as a particle does)")
+    lines.append(f"{'per-action error, RMS':28s} {'pos mm':>10s} {'ori deg':>10s} "
+                 f"{'turn deg':>10s} {'rest mm':>10s} {'rest deg':>10s}")
+    for c in rep["configs"]:
+        t = c["turn"]
+        lines.append(f"{c['name']:28s} {t['position_mm_rms']:10.3f} "
+                     f"{t['orientation_deg_rms']:10.3f} {t['turn_error_deg_rms']:10.3f} "
+                     f"{t['rest_position_mm_rms']:10.3f} {t['rest_orientation_deg_rms']:10.3f}")
+    lines.append("turn: the object's turn about the grasp's axis (thumb to the other "
+                 "contacts); rest: the error left off it")
     return "\n".join(lines)
 
 

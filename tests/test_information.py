@@ -83,6 +83,25 @@ def test_information_only_grows_and_narrower_scales_narrow_the_floor(synthetic_t
     assert (narrow.joint_width_deg > 0).all() and np.isfinite(wide.mean_width_deg)
 
 
+def test_the_turn_term_is_the_dense_covariance_and_only_widens(synthetic_trace):
+    """With the likelihood's turn term the floor is the dense H^T (R + s^2 v v^T)^-1 H sum
+    (`vlr.observation`), and a turn scale only takes information away."""
+    pf, *_, trace, _ = synthetic_trace
+    sp, sr, st = 0.15e-3, np.radians(0.3), np.radians(0.8)
+    info = np.eye(trace.dims)
+    for h, v in zip(trace._jacobians, trace._turns, strict=True):
+        cov = np.diag(np.repeat([sp ** 2, sr ** 2], 3)) + st ** 2 * np.outer(v, v)
+        info += h.T @ np.linalg.solve(cov, h)
+    g = trace.output_jacobian()
+    n = pf.model.n_fingers * pf.model.n_joints
+    dense = np.degrees(3.92 * np.sqrt(np.diag(g @ np.linalg.solve(info, g.T))[:n])).mean()
+    with_turn = trace.bound(sp, sr, sigma_turn=st)
+    assert with_turn.mean_width_deg == pytest.approx(dense, rel=1e-3)
+    assert with_turn.mean_width_deg > trace.bound(sp, sr).mean_width_deg
+    assert (trace.bound(sp, sr, sigma_turn=1e-9).mean_width_deg
+            == pytest.approx(trace.bound(sp, sr).mean_width_deg, rel=1e-6))
+
+
 def test_apple_floor_is_above_the_criterion_at_the_likelihoods_scales():
     rep = crb_report(CrbSettings(trial=TrialSettings(backend="sim", object="apple", seed=0,
                                                      max_iterations=15)))
@@ -142,8 +161,8 @@ def test_the_scales_that_meet_the_criterion_are_found_or_said_to_be_none():
     from sim.crb import _scale_for
 
     def trace(floor: float):  # width = floor + 4 x the scale factor, as a bound behaves
-        return SimpleNamespace(bound=lambda sp, sr: SimpleNamespace(
+        return SimpleNamespace(bound=lambda sp, sr, sigma_turn=0.0: SimpleNamespace(
             mean_width_deg=floor + 4.0 * sp / 1e-3))
 
-    assert _scale_for(trace(0.0), (1e-3, 0.01), 2.0) == pytest.approx(0.5, rel=1e-6)
-    assert np.isnan(_scale_for(trace(3.0), (1e-3, 0.01), 2.0))  # the prior alone is wider
+    assert _scale_for(trace(0.0), (1e-3, 0.01, 0.0), 2.0) == pytest.approx(0.5, rel=1e-6)
+    assert np.isnan(_scale_for(trace(3.0), (1e-3, 0.01, 0.0), 2.0))  # the prior is wider

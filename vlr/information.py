@@ -11,7 +11,10 @@ actions is
     J_t = P_0^-1 + sum_{s <= t} H_s^T R^-1 H_s,   H_s = dy_s / dx,
     R = diag(sigma_pos^2 I_3, sigma_rot^2 I_3),
 
-P_0 the prior's covariance (the filter's spreads; a uniform unknown's variance). The mean
+P_0 the prior's covariance (the filter's spreads; a uniform unknown's variance). With the
+likelihood's turn term (`ObservationModel.sigma_turn`) R_s = R + s^2 v_s v_s^T, v_s the
+grasp's turn at action s (`vlr.observation.grasp_turn`), and by Sherman-Morrison
+H^T R_s^-1 H = H^T R^-1 H - s^2 w w^T / (1 + s^2 v^T R^-1 v), w = H^T R^-1 v. The mean
 squared error of any estimate of the joint angles at t, over the observation noise, is at
 least G_t J_t^-1 G_t^T, G_t = d theta_t / dx (van Trees' inequality, linearised at x), so a
 posterior whose 95% intervals hold the truth as often as they claim is not narrower on
@@ -22,7 +25,7 @@ particle count.
 Derivatives are central differences over the filter's own motion model, batched as
 particles (1 + 2D of them), each dimension stepped by `relative_step` of its prior
 spread. J splits into a position part and a rotation part, so one run gives the bound at
-every pair of scales.
+every pair of scales (and, from the kept H_s and v_s, at every turn scale).
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ from scipy.spatial.transform import Rotation
 
 from vlr.filter import ParticleFilter
 from vlr.motion import STATUS, ParticleState
+from vlr.observation import grasp_turn
 
 __all__ = ["prior_std", "init_motion_config", "truth_vector", "InformationTrace", "Bound"]
 
@@ -122,6 +126,10 @@ class InformationTrace:
         # Information in prior-normalised coordinates v = (x - x0) / scale.
         self.info_pos = np.zeros((d, d))
         self.info_rot = np.zeros((d, d))
+        # Each observation's H (6, D) and the grasp's turn v (6,) there, for the turn term.
+        self.opposed = pf.config.observation.opposed
+        self._jacobians: list[np.ndarray] = []
+        self._turns: list[np.ndarray] = []
         self._add(st)
 
     @property
@@ -168,10 +176,28 @@ class InformationTrace:
         d = self.dims
         return int((self.state.valid[1:d + 1] != self.state.valid[d + 1:]).sum())
 
-    def _add(self, st: ParticleState) -> None:
+    def _observation(self, st: ParticleState) -> tuple[np.ndarray, np.ndarray]:
+        """H (6, D) of the POM pose at `st` and the grasp's turn v (6,) there."""
         jp, jr = self.pose_jacobian(st)
-        self.info_pos += jp.T @ jp
-        self.info_rot += jr.T @ jr
+        v = grasp_turn(st.pos[:1], st.rot[:1], st.anchors[:1], self.opposed)[0]
+        return np.vstack([jp, jr]), v
+
+    def _add(self, st: ParticleState) -> None:
+        h, v = self._observation(st)
+        self.info_pos += h[:3].T @ h[:3]
+        self.info_rot += h[3:].T @ h[3:]
+        self._jacobians.append(h)
+        self._turns.append(v)
+
+    def _turn_information(self, h: np.ndarray, v: np.ndarray, sigma_pos: float,
+                          sigma_rot: float, sigma_turn: float) -> np.ndarray:
+        """What the turn term takes off the information of observations H (K, 6, D) with
+        turns v (K, 6): sum_k s^2 w_k w_k^T / (1 + s^2 v_k^T R^-1 v_k) (module docstring)."""
+        r_inv = np.repeat([sigma_pos ** -2, sigma_rot ** -2], 3)
+        s2 = sigma_turn ** 2
+        w = np.einsum("kad,ka->kd", h, v * r_inv)
+        g = 1.0 + s2 * (v * v * r_inv).sum(axis=-1)
+        return s2 * np.einsum("kd,ke,k->de", w, w, 1.0 / g)
 
     def output_jacobian(self, st: ParticleState | None = None) -> np.ndarray:
         """(N*K + U, D): d(theta_t, unknowns)/dv at the current state."""
@@ -197,13 +223,18 @@ class InformationTrace:
 
     def bound(self, sigma_pos: float, sigma_rot: float,
               extra: tuple[np.ndarray, np.ndarray] | None = None,
-              st: ParticleState | None = None) -> Bound:
-        """The bound now at scales sigma_pos [m], sigma_rot [rad] (module docstring).
-        `extra`, `st`: the information and the state of a previewed action."""
-        ip, ir = self.info_pos, self.info_rot
+              st: ParticleState | None = None, sigma_turn: float = 0.0) -> Bound:
+        """The bound now at scales sigma_pos [m], sigma_rot [rad] and the turn's sigma_turn
+        [rad] (module docstring). `extra`, `st`: H (6, D) and the turn v (6,) of a previewed
+        action, and its state."""
+        h, v = np.array(self._jacobians), np.array(self._turns)
         if extra is not None:
-            ip, ir = ip + extra[0], ir + extra[1]
+            h, v = np.concatenate([h, extra[0][None]]), np.concatenate([v, extra[1][None]])
+        ip = self.info_pos if extra is None else self.info_pos + extra[0][:3].T @ extra[0][:3]
+        ir = self.info_rot if extra is None else self.info_rot + extra[0][3:].T @ extra[0][3:]
         info = np.eye(self.dims) + ip / sigma_pos**2 + ir / sigma_rot**2
+        if sigma_turn > 0:
+            info -= self._turn_information(h, v, sigma_pos, sigma_rot, sigma_turn)
         g = self.output_jacobian(st)
         cov = g @ np.linalg.solve(info, g.T)
         sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -212,8 +243,8 @@ class InformationTrace:
         return Bound(self.actions + (extra is not None), width, float(width.mean()),
                      sd[n_th:])
 
-    def preview(self, command: np.ndarray, sigma_pos: float,
-                sigma_rot: float) -> Bound | None:
+    def preview(self, command: np.ndarray, sigma_pos: float, sigma_rot: float,
+                sigma_turn: float = 0.0) -> Bound | None:
         """The bound if the next action went to `command` (the trace unchanged); None if a
         solve failed."""
         st = self.state.copy()
@@ -222,5 +253,4 @@ class InformationTrace:
             self._check(st, status, "preview")
         except FloatingPointError:
             return None
-        jp, jr = self.pose_jacobian(st)
-        return self.bound(sigma_pos, sigma_rot, (jp.T @ jp, jr.T @ jr), st)
+        return self.bound(sigma_pos, sigma_rot, self._observation(st), st, sigma_turn)

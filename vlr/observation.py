@@ -20,6 +20,24 @@ sigma^2 + (kappa * its predicted motion)^2, position and rotation alike, its mot
 POM's displacement and rotation angle over the action. Since the scales then differ between
 particles, the likelihood keeps its normalisation, -log sigma_pos - log sigma_rot: without
 it, particles predicting large motions would be favoured for their wide tolerance.
+
+The grasp's turn (issue #5, section 5 of RESULTS.md): `vlr gap` finds 94-99% of the model's
+per-action pose error along one direction of the 6-D pose, the object turning in its grip
+about the axis from the opposed finger's contact (the thumb) to the mean of the others'
+contacts. With `sigma_turn` s > 0 the pose error e = (p_pred - p_obs, rotvec(R_pred R_obs^T))
+is Gaussian with covariance
+
+    Sigma = D + s^2 v v^T,  D = diag(sigma_pos^2 I_3, sigma_rot^2 I_3),
+    v = (a x (p - q), a),
+
+v the POM's motion per radian of turn about the unit axis a through the point q (each
+particle's own contacts, `grasp_turn`). By Sherman-Morrison,
+
+    e^T Sigma^-1 e = e^T D^-1 e - s^2 (v^T D^-1 e)^2 / (1 + s^2 v^T D^-1 v),
+    log det Sigma = log det D + log(1 + s^2 v^T D^-1 v),
+
+so the base scales can be narrow (the camera plus what is left off the turn) while a turn of
+the size the model gets wrong costs little.
 """
 
 from __future__ import annotations
@@ -28,12 +46,13 @@ from dataclasses import dataclass
 from typing import Protocol
 
 import numpy as np
+from scipy.spatial.transform import Rotation
 
 from vlr.kinematics import HandModel, pom_from_contacts
 from vlr.motion import ParticleState
 
 __all__ = ["PoseObservation", "PomObservation", "ObservationModel", "rotation_angle",
-           "pom_forward_kinematics"]
+           "rotation_error", "grasp_turn", "pom_forward_kinematics"]
 
 
 class PoseObservation(Protocol):
@@ -61,6 +80,36 @@ def rotation_angle(r_a: np.ndarray, r_b: np.ndarray) -> np.ndarray:
     return 2.0 * np.arcsin(np.clip(d / (2.0 * np.sqrt(2.0)), 0.0, 1.0))
 
 
+def rotation_error(r_pred: np.ndarray, r_obs: np.ndarray) -> np.ndarray:
+    """Rotation vector [rad] of R_pred R_obs^T (the palm-frame turn from the observed to the
+    predicted orientation), batched over leading axes: (..., 3)."""
+    rel = np.einsum("...ab,...cb->...ac", np.asarray(r_pred), np.asarray(r_obs))
+    shape = rel.shape[:-2]
+    return Rotation.from_matrix(rel.reshape(-1, 3, 3)).as_rotvec().reshape(*shape, 3)
+
+
+def grasp_turn(pos: np.ndarray, rot: np.ndarray, anchors: np.ndarray,
+               opposed: int = 0) -> np.ndarray:
+    """(P, 6) v: the POM's motion (position [m], rotation [rad]) per radian of the object
+    turning in its grip (module docstring): about the unit axis a from the opposed finger's
+    contact c_o to the mean of the other contacts, through c_o, v = (a x (p - c_o), a).
+
+    Args:
+        pos, rot: (P, 3), (P, 3, 3) POM poses.
+        anchors: (P, N, 3) the contacts in the object frame (`ParticleState.anchors`).
+        opposed: index of the finger that opposes the others (the thumb)."""
+    pos = np.asarray(pos, dtype=float)
+    c = pos[:, None, :] + np.einsum("pab,pnb->pna", rot, anchors)
+    n = c.shape[1]
+    if not 0 <= opposed < n or n < 3:
+        raise ValueError(f"opposed finger {opposed!r}: needs 0 <= opposed < {n} and >= 3 "
+                         "fingers")
+    others = np.delete(c, opposed, axis=1).mean(axis=1)
+    a = others - c[:, opposed]
+    a /= np.linalg.norm(a, axis=-1, keepdims=True)
+    return np.concatenate([np.cross(a, pos - c[:, opposed]), a], axis=-1)
+
+
 def pom_forward_kinematics(model: HandModel,
                            state: ParticleState) -> tuple[np.ndarray, np.ndarray]:
     """POM pose by forward kinematics of the VLR (Eq. 1-3, 5): contacts from the joint angles,
@@ -77,11 +126,17 @@ class ObservationModel:
         sigma_rot: rotation-angle noise scale [rad] (perception ~0.0035 plus model error).
         motion_fraction: kappa, the model error as a fraction of each particle's predicted
             motion over the action (module docstring); 0 = fixed scales.
+        sigma_turn: s, the model error of the object's turn in its grip [rad] (module
+            docstring); 0 = no turn term.
+        opposed: the finger opposing the others (the thumb's index), which sets the turn's
+            axis.
     """
 
     sigma_pos: float = 0.5e-3
     sigma_rot: float = float(np.radians(1.0))
     motion_fraction: float = 0.0
+    sigma_turn: float = 0.0
+    opposed: int = 0
 
     def __post_init__(self) -> None:
         for name in ("sigma_pos", "sigma_rot"):
@@ -89,6 +144,11 @@ class ObservationModel:
                 raise ValueError(f"{name} {getattr(self, name)!r} must be > 0")
         if not self.motion_fraction >= 0:
             raise ValueError(f"motion_fraction {self.motion_fraction!r} must be >= 0")
+        if not (np.isfinite(self.sigma_turn) and self.sigma_turn >= 0):
+            raise ValueError(f"sigma_turn {self.sigma_turn!r} must be >= 0")
+        if self.sigma_turn > 0 and self.motion_fraction > 0:
+            raise ValueError("sigma_turn and motion_fraction are two models of the same "
+                             "error: set one")
 
     def predict(self, state: ParticleState) -> tuple[np.ndarray, np.ndarray]:
         """Predicted POM pose of every particle: position (P, 3), rotation (P, 3, 3)."""
@@ -109,6 +169,9 @@ class ObservationModel:
 
         `motion`: each particle's predicted POM displacement [m] and rotation angle [rad]
         over the action, (P,) each; used when `motion_fraction` > 0 (module docstring)."""
+        if self.sigma_turn > 0:
+            ll = self._turn_log_likelihood(state, obs)
+            return np.where(state.valid & np.isfinite(ll), ll, -np.inf)
         e_pos, e_rot = self.errors(state, obs)
         if self.motion_fraction > 0 and motion is not None:
             k = self.motion_fraction
@@ -119,3 +182,16 @@ class ObservationModel:
         else:
             ll = -0.5 * ((e_pos / self.sigma_pos) ** 2 + (e_rot / self.sigma_rot) ** 2)
         return np.where(state.valid & np.isfinite(ll), ll, -np.inf)
+
+    def _turn_log_likelihood(self, state: ParticleState, obs: PoseObservation) -> np.ndarray:
+        """Gaussian log-likelihood with the turn's covariance D + s^2 v v^T (module
+        docstring), normalised against D alone, (P,)."""
+        pos, rot = self.predict(state)
+        e = np.concatenate([pos - np.asarray(obs.position)[None, :],
+                            rotation_error(rot, np.asarray(obs.rotation)[None, :, :])], axis=-1)
+        d_inv = np.repeat([self.sigma_pos ** -2, self.sigma_rot ** -2], 3)
+        v = grasp_turn(pos, rot, state.anchors, self.opposed)
+        s2 = self.sigma_turn ** 2
+        vde = (v * d_inv * e).sum(axis=-1)
+        g = 1.0 + s2 * (v * d_inv * v).sum(axis=-1)
+        return -0.5 * ((e * e * d_inv).sum(axis=-1) - s2 * vde ** 2 / g) - 0.5 * np.log(g)

@@ -85,6 +85,9 @@ class TrialSettings:
             rolling contacts where the backend has one, else `DEFAULT_SIGMA`.
         sigma_motion: the likelihood's model error as a fraction of each particle's
             predicted motion over the action (`vlr.observation`, kappa); 0 = fixed scales.
+        sigma_turn_deg: the likelihood's model error of the object's turn in its grip about
+            the grasp's axis, thumb to the other contacts [deg] (`vlr.observation`, s); 0 =
+            no turn term. Needs a hand with a "thumb" finger.
         nominal_theta_deg: the user's guess of the grasp's joint angles [deg] (what one sees
             looking at the hand): K angles for every finger alike, or N x K, finger by
             finger in the hand's order (a thumb that wraps a thin object); None: the
@@ -144,6 +147,7 @@ class TrialSettings:
     sigma_pos_mm: float | None = None
     sigma_rot_deg: float | None = None
     sigma_motion: float = 0.0
+    sigma_turn_deg: float = 0.0
     nominal_theta_deg: tuple[float, ...] | None = None
     prior_spread_deg: float | None = None
     rolling: bool | None = None
@@ -181,6 +185,10 @@ class TrialSettings:
                 raise UserError(f"{name} {v} must be > 0")
         if not self.sigma_motion >= 0:
             raise UserError(f"sigma_motion {self.sigma_motion} must be >= 0")
+        if not (math.isfinite(self.sigma_turn_deg) and self.sigma_turn_deg >= 0):
+            raise UserError(f"sigma_turn_deg {self.sigma_turn_deg} must be >= 0")
+        if self.sigma_turn_deg > 0 and self.sigma_motion > 0:
+            raise UserError("sigma_turn_deg and sigma_motion model the same error: set one")
         if self.true_stiffness and self.backend != "synthetic":
             raise UserError("true_stiffness is for the synthetic world only: in the sim, "
                             "give a true_hand whose finger has the other spring (e.g. "
@@ -245,6 +253,7 @@ class TrialSettings:
             if not is_int(getattr(self, name)):
                 raise bad(name, "an integer")
         for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg", "sigma_motion",
+                     "sigma_turn_deg",
                      "slide_friction", "spin_friction", "active_model_error",
                      "active_min_force_n",
                      "contact_stiffness", "cone_return"):
@@ -475,6 +484,18 @@ def check_unknowns(settings: TrialSettings, model) -> None:
             raise UserError(f"unknown {u!r}: {exc}") from None
 
 
+def _turn(settings: TrialSettings, model) -> dict:
+    """The likelihood's turn term (`ObservationModel.sigma_turn`, `opposed`): the thumb
+    opposes the others."""
+    if not settings.sigma_turn_deg:
+        return {}
+    if "thumb" not in model.names:
+        raise UserError(f"sigma_turn_deg: the turn's axis runs from the thumb, and the hand's "
+                        f"fingers are {list(model.names)}")
+    return {"sigma_turn": math.radians(settings.sigma_turn_deg),
+            "opposed": model.finger_index("thumb")}
+
+
 def identify_config(settings: TrialSettings, model):
     """The `IdentifyConfig` of a trial; bad unknown specs become a UserError."""
     from vlr.active import ActiveExploration
@@ -494,7 +515,8 @@ def identify_config(settings: TrialSettings, model):
                            else {"jitter_h": float(settings.jitter_h)}),
                         observation=ObservationModel(sigma_pos=sp * 1e-3,
                                                      sigma_rot=float(np.radians(sr)),
-                                                     motion_fraction=settings.sigma_motion))
+                                                     motion_fraction=settings.sigma_motion,
+                                                     **_turn(settings, model)))
     actions = {}
     if settings.action_range_mm is not None:
         actions["action_range"] = tuple(v * 1e-3 for v in settings.action_range_mm)
