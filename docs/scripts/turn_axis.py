@@ -1,0 +1,67 @@
+"""Where the rolling model's per-action error points: the principal direction of the 6x6
+covariance of its pose errors (position [mm], rotation vector [deg]) over `vlr gap`'s
+actions, its share of the variance, and the angle between its rotation axis and the grasp's
+turn axis (thumb to the other contacts, `vlr.observation.grasp_turn`). docs/RESULTS.md 5,
+"The turn, measured and given its own scale". A one-off diagnostic that reads the sim's
+truth; not part of the package.
+
+    MUJOCO_GL=egl python docs/scripts/turn_axis.py [OBJECT ...] [--seed S] [--actions N]
+"""
+
+import argparse
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from sim.gap import _ALL, GapSettings, _pose, _state, record_actions
+from vlr.kinematics import HandModel
+from vlr.motion import MotionConfig, MotionModel, ObjectParams
+from vlr.observation import grasp_turn, rotation_error
+
+
+def principal_direction(obj: str, seed: int, actions: int) -> dict:
+    rec = record_actions(GapSettings(object=obj, seed=seed, actions=actions))
+    model = HandModel.from_spec(rec.hand_spec)
+    cfg = MotionConfig(terms=_ALL)
+    motion = MotionModel(model, ObjectParams.from_spec(rec.object_spec), cfg)
+    settle = replace(cfg, jump_theta=1.0, jump_pos=0.05, max_iter=200)
+    thumb = model.finger_index("thumb")
+    errors, axes = [], []
+    for k in range(len(rec.commands) - 1):
+        t0, t1 = rec.truths[k], rec.truths[k + 1]
+        st = _state(model, t0)
+        motion.solve(st, rec.commands[k], settle)
+        p0, r0 = _pose(st)
+        axes.append(grasp_turn(st.pos, st.rot, st.anchors, thumb)[0, 3:])
+        motion.solve(st, rec.commands[k + 1], u_from=rec.commands[k])
+        if not st.valid[0]:
+            continue
+        p1, r1 = _pose(st)
+        e_p = (p1 - p0) - (t1.position - t0.position)
+        e_r = rotation_error((r1 @ r0.T) @ (t1.rotation @ t0.rotation.T).T, np.eye(3))
+        errors.append(np.concatenate([e_p * 1e3, np.degrees(e_r)]))
+    ev, vec = np.linalg.eigh(np.cov(np.array(errors).T))
+    w = vec[3:, -1] / np.linalg.norm(vec[3:, -1])
+    a = np.mean(axes, axis=0)
+    a /= np.linalg.norm(a)
+    return {"object": obj, "share": float(ev[-1] / ev.sum()),
+            "axis": w, "angle_to_thumb_axis_deg": math.degrees(math.acos(min(1.0, abs(w @ a))))}
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("objects", nargs="*", default=["apple", "wine_glass", "toy_block",
+                                                   "flat_screwdriver", "gelatin_box"])
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--actions", type=int, default=30)
+    args = ap.parse_args()
+    for obj in args.objects:
+        r = principal_direction(obj, args.seed, args.actions)
+        print(f"{obj:18s} share of the error variance {r['share']:.3f}, rotation axis "
+              f"{np.round(r['axis'], 3)}, {r['angle_to_thumb_axis_deg']:.1f} deg from the "
+              "thumb's axis")
+
+
+if __name__ == "__main__":
+    main()
