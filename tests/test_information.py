@@ -132,6 +132,33 @@ def test_bad_crb_settings_are_named(kw):
         CrbSettings(**kw)
 
 
+def test_crb_sweep_skips_a_trial_it_cannot_linearise(tmp_path, capsys, monkeypatch):
+    """A sweep's trial whose model cannot be differenced is skipped and listed; the others'
+    floors are still written."""
+    import sim.crb
+
+    sweep = tmp_path / "s.yaml"
+    sweep.write_text(f"name: two\nout: {tmp_path / 'runs'}\nseeds: 0-1\n"
+                     "settings: {backend: synthetic, "
+                     "max_iterations: 2}\ncases:\n  - {name: known hand}\n")
+    real = sim.crb.crb_report
+
+    def flaky(s):
+        if s.trial.seed == 1:
+            raise FloatingPointError("action 1: 3 of 49 solves failed; both steps of x")
+        return real(s)
+
+    monkeypatch.setattr(sim.crb, "crb_report", flaky)
+    out = tmp_path / "crb.json"
+    assert main(["crb", "--sweep", str(sweep), "--json", str(out)]) == 0
+    rep = json.loads(out.read_text())
+    assert [t["seed"] for t in rep["trials"]] == [0]
+    assert rep["skipped"] == [{"case": "known hand", "seed": 1,
+                               "error": "action 1: 3 of 49 solves failed; both steps of x"}]
+    text = capsys.readouterr().out
+    assert "skipped: known hand, seed 1" in text and "1 trial(s) skipped" in text
+
+
 def test_crb_cli_bad_json_folder(tmp_path, capsys):
     assert main(["crb", "--json", str(tmp_path / "missing" / "c.json")]) == 2
     assert "folder does not exist" in capsys.readouterr().err
