@@ -49,6 +49,33 @@ def principal_direction(obj: str, seed: int, actions: int) -> dict:
             "axis": w, "angle_to_thumb_axis_deg": math.degrees(math.acos(min(1.0, abs(w @ a))))}
 
 
+def own_path_split(obj: str, seed: int, actions: int) -> np.ndarray:
+    """RMS over the actions of the open-loop model's absolute pose error against the sim:
+    position [mm], orientation [deg], its turn [deg], the rest's position [mm] and
+    orientation [deg]."""
+    rec = record_actions(GapSettings(object=obj, seed=seed, actions=actions))
+    model = HandModel.from_spec(rec.hand_spec)
+    cfg = MotionConfig(terms=_ALL)
+    motion = MotionModel(model, ObjectParams.from_spec(rec.object_spec), cfg)
+    thumb = model.finger_index("thumb")
+    st = _state(model, rec.truths[0])
+    motion.solve(st, rec.commands[0], replace(cfg, jump_theta=1.0, jump_pos=0.05, max_iter=200))
+    rows = []
+    for k in range(1, len(rec.commands)):
+        v = grasp_turn(st.pos, st.rot, st.anchors, thumb)[0]
+        motion.solve(st, rec.commands[k], u_from=rec.commands[k - 1])
+        if not st.valid[0]:
+            break
+        p, r = _pose(st)
+        e_p = p - rec.truths[k].position
+        e_r = rotation_error(r, rec.truths[k].rotation)
+        turn = float(e_r @ v[3:])
+        rows.append([np.linalg.norm(e_p) * 1e3, math.degrees(np.linalg.norm(e_r)),
+                     math.degrees(turn), np.linalg.norm(e_p - turn * v[:3]) * 1e3,
+                     math.degrees(np.linalg.norm(e_r - turn * v[3:]))])
+    return np.sqrt(np.mean(np.square(rows), axis=0))
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("objects", nargs="*", default=["apple", "wine_glass", "toy_block",
@@ -61,6 +88,9 @@ def main() -> None:
         print(f"{obj:18s} share of the error variance {r['share']:.3f}, rotation axis "
               f"{np.round(r['axis'], 3)}, {r['angle_to_thumb_axis_deg']:.1f} deg from the "
               "thumb's axis")
+        e = own_path_split(obj, args.seed, args.actions)
+        print(f"{'':18s} own path: error {e[0]:.3f} mm / {e[1]:.3f} deg, its turn {e[2]:.3f} "
+              f"deg, the rest {e[3]:.3f} mm / {e[4]:.3f} deg (RMS)")
 
 
 if __name__ == "__main__":
