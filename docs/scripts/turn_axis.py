@@ -15,6 +15,7 @@ from dataclasses import replace
 import numpy as np
 
 from sim.gap import _ALL, GapSettings, _pose, _state, record_actions
+from sim.pads import SLIDE_FRICTION, TORSION_FRICTION
 from vlr.kinematics import HandModel
 from vlr.motion import MotionConfig, MotionModel, ObjectParams
 from vlr.observation import grasp_turn, rotation_error
@@ -49,13 +50,15 @@ def principal_direction(obj: str, seed: int, actions: int) -> dict:
             "axis": w, "angle_to_thumb_axis_deg": math.degrees(math.acos(min(1.0, abs(w @ a))))}
 
 
-def own_path_split(obj: str, seed: int, actions: int) -> np.ndarray:
+def own_path_split(obj: str, seed: int, actions: int, friction: bool = False) -> np.ndarray:
     """RMS over the actions of the open-loop model's absolute pose error against the sim:
     position [mm], orientation [deg], its turn [deg], the rest's position [mm] and
-    orientation [deg]."""
+    orientation [deg]. `friction`: with the pads' friction (the sim's coefficients)."""
     rec = record_actions(GapSettings(object=obj, seed=seed, actions=actions))
     model = HandModel.from_spec(rec.hand_spec)
     cfg = MotionConfig(terms=_ALL)
+    if friction:
+        cfg = replace(cfg, slide_friction=SLIDE_FRICTION, spin_friction=TORSION_FRICTION)
     motion = MotionModel(model, ObjectParams.from_spec(rec.object_spec), cfg)
     thumb = model.finger_index("thumb")
     st = _state(model, rec.truths[0])
@@ -82,6 +85,8 @@ def main() -> None:
                                                    "flat_screwdriver", "gelatin_box"])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--actions", type=int, default=30)
+    ap.add_argument("--friction", action="store_true",
+                    help="the own path with the pads' friction too")
     args = ap.parse_args()
     for obj in args.objects:
         r = principal_direction(obj, args.seed, args.actions)
@@ -91,6 +96,10 @@ def main() -> None:
         e = own_path_split(obj, args.seed, args.actions)
         print(f"{'':18s} own path: error {e[0]:.3f} mm / {e[1]:.3f} deg, its turn {e[2]:.3f} "
               f"deg, the rest {e[3]:.3f} mm / {e[4]:.3f} deg (RMS)")
+        if args.friction:
+            e = own_path_split(obj, args.seed, args.actions, friction=True)
+            print(f"{'':18s} with friction: error {e[0]:.3f} mm / {e[1]:.3f} deg, its turn "
+                  f"{e[2]:.3f} deg, the rest {e[3]:.3f} mm / {e[4]:.3f} deg (RMS)")
 
 
 if __name__ == "__main__":
