@@ -6,6 +6,7 @@ turn axis (thumb to the other contacts, `vlr.observation.grasp_turn`). docs/RESU
 truth; not part of the package.
 
     MUJOCO_GL=egl python docs/scripts/turn_axis.py [OBJECT ...] [--seed S] [--actions N]
+        [--slide-friction MU] [--spin-friction MU_T] [--spin-stiffness K]
 """
 
 import argparse
@@ -15,7 +16,6 @@ from dataclasses import replace
 import numpy as np
 
 from sim.gap import _ALL, GapSettings, _pose, _state, record_actions
-from sim.pads import SLIDE_FRICTION, TORSION_FRICTION
 from vlr.kinematics import HandModel
 from vlr.motion import MotionConfig, MotionModel, ObjectParams
 from vlr.observation import grasp_turn, rotation_error
@@ -50,15 +50,14 @@ def principal_direction(obj: str, seed: int, actions: int) -> dict:
             "axis": w, "angle_to_thumb_axis_deg": math.degrees(math.acos(min(1.0, abs(w @ a))))}
 
 
-def own_path_split(obj: str, seed: int, actions: int, friction: bool = False) -> np.ndarray:
+def own_path_split(obj: str, seed: int, actions: int, **motion: float) -> np.ndarray:
     """RMS over the actions of the open-loop model's absolute pose error against the sim:
     position [mm], orientation [deg], its turn [deg], the rest's position [mm] and
-    orientation [deg]. `friction`: with the pads' friction (the sim's coefficients)."""
+    orientation [deg]. `motion`: `MotionConfig` settings over the rolling model's (the pads'
+    friction, their spin stiffness)."""
     rec = record_actions(GapSettings(object=obj, seed=seed, actions=actions))
     model = HandModel.from_spec(rec.hand_spec)
-    cfg = MotionConfig(terms=_ALL)
-    if friction:
-        cfg = replace(cfg, slide_friction=SLIDE_FRICTION, spin_friction=TORSION_FRICTION)
+    cfg = replace(MotionConfig(terms=_ALL), **motion)
     motion = MotionModel(model, ObjectParams.from_spec(rec.object_spec), cfg)
     thumb = model.finger_index("thumb")
     st = _state(model, rec.truths[0])
@@ -85,9 +84,16 @@ def main() -> None:
                                                    "flat_screwdriver", "gelatin_box"])
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--actions", type=int, default=30)
-    ap.add_argument("--friction", action="store_true",
-                    help="the own path with the pads' friction too")
+    ap.add_argument("--slide-friction", type=float, default=None,
+                    help="the own path again with this sliding friction (inf: none slides)")
+    ap.add_argument("--spin-friction", type=float, default=0.0,
+                    help="... and this torsional friction [m] (the sim's: 0.001)")
+    ap.add_argument("--spin-stiffness", type=float, default=0.0,
+                    help="... or an elastic spin [N m/rad]")
     args = ap.parse_args()
+    motion = {k: v for k, v in (("slide_friction", args.slide_friction),
+                                ("spin_friction", args.spin_friction),
+                                ("spin_stiffness", args.spin_stiffness)) if v}
     for obj in args.objects:
         r = principal_direction(obj, args.seed, args.actions)
         print(f"{obj:18s} share of the error variance {r['share']:.3f}, rotation axis "
@@ -96,9 +102,9 @@ def main() -> None:
         e = own_path_split(obj, args.seed, args.actions)
         print(f"{'':18s} own path: error {e[0]:.3f} mm / {e[1]:.3f} deg, its turn {e[2]:.3f} "
               f"deg, the rest {e[3]:.3f} mm / {e[4]:.3f} deg (RMS)")
-        if args.friction:
-            e = own_path_split(obj, args.seed, args.actions, friction=True)
-            print(f"{'':18s} with friction: error {e[0]:.3f} mm / {e[1]:.3f} deg, its turn "
+        if motion:
+            e = own_path_split(obj, args.seed, args.actions, **motion)
+            print(f"{'':18s} with {motion}: error {e[0]:.3f} mm / {e[1]:.3f} deg, its turn "
                   f"{e[2]:.3f} deg, the rest {e[3]:.3f} mm / {e[4]:.3f} deg (RMS)")
 
 
