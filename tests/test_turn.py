@@ -42,6 +42,16 @@ def test_turn_likelihood_is_the_dense_gaussian():
         assert ll[i] == pytest.approx(ref, rel=1e-9)
 
 
+def test_a_failed_solve_gets_no_weight_not_an_error():
+    st = _particles(3)
+    st.valid[1:] = False
+    st.rot[1] = np.nan
+    st.rot[2] = 0.0
+    obs = PomObservation(st.pos[0], st.rot[0])
+    ll = ObservationModel(sigma_turn=0.01).log_likelihood(st, obs)
+    assert np.isfinite(ll[0]) and np.isneginf(ll[1:]).all()
+
+
 def test_a_turn_costs_little_and_the_same_error_off_it_a_lot():
     st = _particles(1, seed=2)
     v = grasp_turn(st.pos, st.rot, st.anchors, 0)[0]

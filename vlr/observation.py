@@ -187,6 +187,10 @@ class ObservationModel:
         """Gaussian log-likelihood with the turn's covariance D + s^2 v v^T (module
         docstring), normalised against D alone, (P,)."""
         pos, rot = self.predict(state)
+        # A failed solve's pose may be NaN or degenerate, which the rotation vector refuses;
+        # its weight is -inf anyway (`log_likelihood`).
+        ok = np.asarray(state.valid) & np.isfinite(rot).all(axis=(1, 2))
+        rot = np.where(ok[:, None, None], rot, np.eye(3))
         e = np.concatenate([pos - np.asarray(obs.position)[None, :],
                             rotation_error(rot, np.asarray(obs.rotation)[None, :, :])], axis=-1)
         d_inv = np.repeat([self.sigma_pos ** -2, self.sigma_rot ** -2], 3)
