@@ -227,13 +227,14 @@ class InformationTrace:
         """The bound now at scales sigma_pos [m], sigma_rot [rad] and the turn's sigma_turn
         [rad] (module docstring). `extra`, `st`: H (6, D) and the turn v (6,) of a previewed
         action, and its state."""
-        h, v = np.array(self._jacobians), np.array(self._turns)
-        if extra is not None:
-            h, v = np.concatenate([h, extra[0][None]]), np.concatenate([v, extra[1][None]])
         ip = self.info_pos if extra is None else self.info_pos + extra[0][:3].T @ extra[0][:3]
         ir = self.info_rot if extra is None else self.info_rot + extra[0][3:].T @ extra[0][3:]
         info = np.eye(self.dims) + ip / sigma_pos**2 + ir / sigma_rot**2
         if sigma_turn > 0:
+            h, v = np.array(self._jacobians), np.array(self._turns)
+            if extra is not None:
+                h = np.concatenate([h, extra[0][None]])
+                v = np.concatenate([v, extra[1][None]])
             info -= self._turn_information(h, v, sigma_pos, sigma_rot, sigma_turn)
         g = self.output_jacobian(st)
         cov = g @ np.linalg.solve(info, g.T)
