@@ -53,7 +53,7 @@ def _fake_filter(common_gain: float, sigma_pos: float):
     class Obs:
         pass
 
-    Obs.sigma_pos, Obs.sigma_rot = sigma_pos, 0.02
+    Obs.sigma_pos, Obs.sigma_rot, Obs.sigma_turn, Obs.opposed = sigma_pos, 0.02, 0.0, 0
 
     class Config:
         observation = Obs()
@@ -176,3 +176,35 @@ def test_the_force_screen_passes_over_a_candidate_that_parts_a_contact(monkeypat
 
     np.testing.assert_allclose(choose_with([0.0, 0.01, 1.0]), cands[2])
     np.testing.assert_allclose(choose_with([0.0, 0.03, 0.01]), cands[1])  # all under: safest
+
+
+def test_a_spread_along_the_turn_counts_for_little_with_the_turn_term():
+    """`noise_covariance`'s turn term: outcomes that differ only along the turn direction
+    v are worth little, outcomes off it as much as without the term."""
+    rng = np.random.default_rng(1)
+    v = np.array([0.0, 0.04, 0.0, 1.0, 0.0, 0.0])  # the POM's motion per radian of turn
+    a = rng.normal(0, 0.01, 200)                    # radians of turn per particle
+    along = a[:, None] * v
+    off = np.zeros((200, 6))
+    off[:, 2], off[:, 4] = 4e-4 * rng.standard_normal(200), 0.01 * rng.standard_normal(200)
+    sp, sr, st = 2e-4, np.radians(0.4), np.radians(1.0)
+    for y, cut in ((along, 0.2), (off, 0.99)):
+        pos, rot = y[:, :3], rotvec_to_matrix(y[:, 3:])
+        plain = prediction_spread(pos, rot, sp, sr)
+        turned = prediction_spread(pos, rot, sp, sr, v, st)
+        assert turned <= plain
+        assert (turned < cut * plain) == (cut < 0.5)
+    # The joints follow the turn only: the turn term leaves them near their prior spread.
+    told = np.stack([a, -a], axis=1)
+    pos, rot = along[:, :3], rotvec_to_matrix(along[:, 3:])
+    prior = told.std(axis=0, ddof=1).mean()
+    plain, turned = (expected_joint_sd(told, pos, rot, sp, sr),
+                     expected_joint_sd(told, pos, rot, sp, sr, v, st))
+    assert plain < 0.5 * prior and turned > 0.8 * prior, (plain / prior, turned / prior)
+
+
+def test_active_choice_with_the_turn_term_runs_end_to_end():
+    r = run_trial(TrialSettings(backend="synthetic", particles=500, seed=0, max_iterations=3,
+                                exploration="active", active_criterion="variance",
+                                sigma_turn_deg=1.0))
+    assert r["iterations"] >= 1 and np.isfinite(r["errors"]["proximal_deg_mean"])
