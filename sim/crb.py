@@ -5,7 +5,8 @@ The paper's convergence criterion is the mean 95% interval of the joint angles u
 degrees (METHOD.md 3). This tool linearises the filter's OWN model (the one `vlr identify`
 builds for the same settings: its prior, unknowns and likelihood scales) at the simulator's
 true configuration after the grasp, follows the actions `vlr identify --seed` takes (or,
-with `--candidates`, an oracle that picks each action to narrow the bound the most), and
+with `--candidates`, an oracle that picks each action to narrow the bound the most; with
+`--replay`, the actions a finished trial took, e.g. active exploration's), and
 reports the Bayesian Cramér-Rao floor of that measure after each action, at the likelihood's
 scales and at the camera's own accuracy. It needs a world with ground truth, the sim or the
 synthetic world (where the model is the world, so the floor is what a perfect model allows):
@@ -53,6 +54,9 @@ class CrbSettings:
         target_deg: the convergence criterion [deg] (METHOD.md 3).
         budget: the actions at which the scales that would just meet the criterion are
             reported (the paper's 15.1 iterations).
+        replay: the tendon commands [m] a trial reported, the grasp's first
+            (`commands_mm_by_iteration` of its result); when given, the bound follows
+            these actions instead (`replay_commands`).
     """
 
     trial: TrialSettings = field(default_factory=_sim_trial)
@@ -60,6 +64,7 @@ class CrbSettings:
     relative_step: float = 0.02
     target_deg: float = 2.0
     budget: int = 15
+    replay: tuple[tuple[float, ...], ...] = ()
 
     def __post_init__(self) -> None:
         if self.trial.backend not in ("sim", "synthetic"):
@@ -73,10 +78,31 @@ class CrbSettings:
             raise UserError(f"target {self.target_deg!r} deg must be > 0")
         if not isinstance(self.budget, int) or self.budget < 1:
             raise UserError(f"budget {self.budget!r} must be an integer >= 1")
+        if self.replay and self.candidates:
+            raise UserError("replay follows a trial's own actions; candidates pick new ones: "
+                            "give one")
 
     @property
     def actions(self) -> int:
+        if self.replay:
+            return len(self.replay) - 1
         return self.trial.max_iterations
+
+
+def replay_commands(record: dict, where: str) -> tuple[TrialSettings,
+                                                       tuple[tuple[float, ...], ...]]:
+    """The settings and the reported tendon commands [m] of a finished trial's record (a
+    `vlr sweep` trial file: its "settings" and its result's `commands_mm_by_iteration`)."""
+    settings, result = record.get("settings"), record.get("result") or {}
+    cmds = result.get("commands_mm_by_iteration")
+    if not isinstance(settings, dict) or not cmds:
+        raise UserError(f"{where}: not a sweep trial record with its commands (a trial "
+                        "file under runs/SWEEP/trials/, written since the commands were "
+                        "recorded; re-run the trial)")
+    u = np.asarray(cmds, dtype=float)
+    if u.ndim != 2 or len(u) < 2 or not np.isfinite(u).all():
+        raise UserError(f"{where}: commands_mm_by_iteration must be two or more finite rows")
+    return TrialSettings.from_dict(settings), tuple(map(tuple, u * 1e-3))
 
 
 def _bound(trace, sigma: tuple[float, float, float]):
@@ -118,6 +144,9 @@ def crb_report(s: CrbSettings) -> dict:
                  math.radians(ts.sigma_turn_deg))
         camera = (CAMERA_SIGMA[0] * 1e-3, math.radians(CAMERA_SIGMA[1]), 0.0)
         u = report_commands(world.world.grasp())
+        if s.replay and not np.allclose(u, s.replay[0], rtol=0, atol=1e-9):
+            raise UserError(f"the replayed trial's grasp commands {np.round(s.replay[0], 6)} "
+                            f"differ from the sim's {np.round(u, 6)}: not the same trial")
         truth = world.truth()
         trace = InformationTrace(pf, truth_vector(pf, truth), truth.position, truth.rotation,
                                  u, s.relative_step)
@@ -129,7 +158,9 @@ def crb_report(s: CrbSettings) -> dict:
         scale_at_budget = None
         lost = None
         for k in range(1, s.actions + 1):
-            if s.candidates:
+            if s.replay:
+                delta = np.asarray(s.replay[k]) - u
+            elif s.candidates:
                 delta = _oracle(trace, rng, u, center, explore, s.candidates, sigma)
             else:
                 delta = random_action(rng, u, center, explore)
@@ -156,7 +187,8 @@ def crb_report(s: CrbSettings) -> dict:
     return {
         "object": ts.object, "hand": ts.hand, "true_hand": ts.true_hand,
         "unknowns": list(ts.unknowns), "seed": ts.seed,
-        "actions": "oracle" if s.candidates else "random", "candidates": s.candidates,
+        "actions": ("replay" if s.replay else "oracle" if s.candidates else "random"),
+        "candidates": s.candidates,
         "sigma_pos_mm": ts.sigma[0], "sigma_rot_deg": ts.sigma[1],
         "sigma_turn_deg": ts.sigma_turn_deg,
         "camera_sigma": list(CAMERA_SIGMA), "prior_spread_deg": ts.grasp_guess[1],
@@ -274,6 +306,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sweep", default=None, metavar="FILE",
                    help="bound every trial of a sweep file (its cases and seeds; the "
                    "trial options below are then ignored)")
+    p.add_argument("--replay", nargs="+", default=None, metavar="TRIAL",
+                   help="bound along the actions finished trials took: `vlr sweep` trial "
+                   "files (runs/SWEEP/trials/*.json), with their own settings (the trial "
+                   "options below are then ignored)")
     p.add_argument("--object", default="apple", help="object name or spec file")
     p.add_argument("--hand", default="modelo", help="the filter's hand (default modelo)")
     p.add_argument("--true-hand", default=None, help="the sim's hand when it differs")
@@ -325,6 +361,27 @@ def _trials(args: argparse.Namespace) -> list[tuple[str, TrialSettings]]:
         action_band_mm=args.action_band_mm))]
 
 
+def _replays(paths: list[str]) -> list[tuple[str, TrialSettings, tuple]]:
+    """(case, settings, commands) of each trial file (`replay_commands`)."""
+    import json
+    from dataclasses import replace
+    from pathlib import Path
+
+    out = []
+    for path in paths:
+        try:
+            record = json.loads(Path(path).read_text())
+        except FileNotFoundError:
+            raise UserError(f"--replay {path}: no such file") from None
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise UserError(f"--replay {path}: not JSON ({exc})") from None
+        if not isinstance(record, dict):
+            raise UserError(f"--replay {path}: not a sweep trial record")
+        t, u = replay_commands(record, f"--replay {path}")
+        out.append((str(record.get("case", "trial")), replace(t, particles=1000), u))
+    return out
+
+
 def _main(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -332,16 +389,24 @@ def _main(args: argparse.Namespace) -> int:
 
     if args.json and not Path(args.json).resolve().parent.is_dir():
         raise UserError(f"--json {args.json}: its folder does not exist")
-    settings = [(case, CrbSettings(trial=t, candidates=args.candidates,
-                                   relative_step=args.relative_step))
-                for case, t in _trials(args)]
+    if args.replay:
+        if args.sweep:
+            raise UserError("give --sweep or --replay, not both")
+        settings = [(case, CrbSettings(trial=t, candidates=args.candidates,
+                                       relative_step=args.relative_step, replay=u))
+                    for case, t, u in _replays(args.replay)]
+    else:
+        settings = [(case, CrbSettings(trial=t, candidates=args.candidates,
+                                       relative_step=args.relative_step))
+                    for case, t in _trials(args)]
+    many = bool(args.sweep) or len(settings) > 1
     reports, failed = [], []
     for case, s in settings:
         try:
             rep = crb_report(s)
         except FloatingPointError as exc:
             msg = f"{case}, seed {s.trial.seed}: the bound could not be linearised: {exc}"
-            if not args.sweep:
+            if not many:
                 raise UserError(msg) from None
             # One trial's model that cannot be differenced does not void the sweep's others.
             print(f"skipped: {msg}\n", flush=True)
@@ -349,15 +414,15 @@ def _main(args: argparse.Namespace) -> int:
             continue
         print(format_report(rep) + "\n", flush=True)
         reports.append((case, rep))
-    if args.sweep:
+    if many:
         print(summary_table(reports))
         if failed:
             print(f"{len(failed)} trial(s) skipped: "
                   + "; ".join(f"{f['case']} seed {f['seed']}" for f in failed))
     if args.json:
-        write_json_atomic(args.json, reports[0][1] if not args.sweep else
-                          {"sweep": args.sweep, "trials": [{"case": c, **r}
-                                                           for c, r in reports],
+        write_json_atomic(args.json, reports[0][1] if not many else
+                          {"sweep": args.sweep, "replay": args.replay,
+                           "trials": [{"case": c, **r} for c, r in reports],
                            "skipped": failed})
         print(f"wrote {args.json}")
     return 0

@@ -193,3 +193,33 @@ def test_the_scales_that_meet_the_criterion_are_found_or_said_to_be_none():
 
     assert _scale_for(trace(0.0), (1e-3, 0.01, 0.0), 2.0) == pytest.approx(0.5, rel=1e-6)
     assert np.isnan(_scale_for(trace(3.0), (1e-3, 0.01, 0.0), 2.0))  # the prior is wider
+
+
+def test_replaying_a_trials_actions_gives_its_floor(tmp_path, capsys):
+    """`vlr crb --replay`: the commands a trial recorded, replayed, are the seed's own random
+    actions, so the floor is the one `vlr crb` finds for that seed."""
+    from vlr.trial import run_trial
+
+    ts = TrialSettings(backend="synthetic", seed=3, particles=300, max_iterations=3)
+    result = run_trial(ts)
+    assert len(result["commands_mm_by_iteration"]) == 4
+    record = tmp_path / "trial.json"
+    record.write_text(json.dumps({"case": "synthetic", "settings": ts.to_dict(),
+                                  "result": result}))
+    out = tmp_path / "crb.json"
+    assert main(["crb", "--replay", str(record), "--json", str(out)]) == 0
+    replayed = json.loads(out.read_text())
+    direct = crb_report(CrbSettings(trial=ts))
+    assert replayed["actions"] == "replay" and len(replayed["by_action"]) == 4
+    assert ([r["mean_width_deg"] for r in replayed["by_action"]]
+            == pytest.approx([r["mean_width_deg"] for r in direct["by_action"]], rel=1e-6))
+    # A record from another trial's grasp, or one without commands, is named.
+    bad = json.loads(record.read_text())
+    bad["result"]["commands_mm_by_iteration"][0][0] += 1.0
+    record.write_text(json.dumps(bad))
+    assert main(["crb", "--replay", str(record)]) == 2
+    assert "not the same trial" in capsys.readouterr().err
+    del bad["result"]["commands_mm_by_iteration"]
+    record.write_text(json.dumps(bad))
+    assert main(["crb", "--replay", str(record)]) == 2
+    assert "commands" in capsys.readouterr().err

@@ -37,6 +37,10 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
     # Per iteration (the grasp's update first): the convergence measure, and against the
     # truth the mean proximal error, so that a table can read either at any iteration.
     out["ci_deg_by_iteration"] = [round(float(r.ci_deg), 4) for r in result.history]
+    # The tendon commands the hand reported [mm], so that `vlr crb --replay` can follow the
+    # actions a trial took (active exploration's are not a seed's random stream).
+    out["commands_mm_by_iteration"] = [[round(float(x) * 1e3, 9) for x in r.command]
+                                       for r in result.history]
     if result.scores:
         out["proximal_deg_by_iteration"] = [
             round(float(sc.theta_error_deg.reshape(n, k)[:, 0].mean()), 4)
