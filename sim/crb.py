@@ -100,8 +100,8 @@ def replay_commands(record: dict, where: str) -> tuple[TrialSettings,
                         "file under runs/SWEEP/trials/, written since the commands were "
                         "recorded; re-run the trial)")
     u = np.asarray(cmds, dtype=float)
-    if u.ndim != 2 or len(u) < 2 or not np.isfinite(u).all():
-        raise UserError(f"{where}: commands_mm_by_iteration must be two or more finite rows")
+    if u.ndim != 2 or not np.isfinite(u).all():
+        raise UserError(f"{where}: commands_mm_by_iteration must be rows of finite numbers")
     return TrialSettings.from_dict(settings), tuple(map(tuple, u * 1e-3))
 
 
