@@ -140,8 +140,7 @@ def crb_report(s: CrbSettings) -> dict:
     try:
         cfg = identify_config(ts, world.model)
         pf = ParticleFilter(world.model, world.obj, cfg.filter)
-        sigma = (ts.sigma[0] * 1e-3, math.radians(ts.sigma[1]),
-                 math.radians(ts.sigma_turn_deg))
+        sigma = (ts.sigma[0] * 1e-3, math.radians(ts.sigma[1]), math.radians(ts.turn_deg))
         camera = (CAMERA_SIGMA[0] * 1e-3, math.radians(CAMERA_SIGMA[1]), 0.0)
         u = report_commands(world.world.grasp())
         if s.replay and not np.allclose(u, s.replay[0], rtol=0, atol=1e-9):
@@ -190,7 +189,7 @@ def crb_report(s: CrbSettings) -> dict:
         "actions": ("replay" if s.replay else "oracle" if s.candidates else "random"),
         "candidates": s.candidates,
         "sigma_pos_mm": ts.sigma[0], "sigma_rot_deg": ts.sigma[1],
-        "sigma_turn_deg": ts.sigma_turn_deg,
+        "sigma_turn_deg": ts.turn_deg,
         "camera_sigma": list(CAMERA_SIGMA), "prior_spread_deg": ts.grasp_guess[1],
         "relative_step": s.relative_step, "target_deg": s.target_deg,
         "grasp_lost_at": lost,
@@ -322,8 +321,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "vlr identify's random actions)")
     p.add_argument("--sigma-pos-mm", type=float, default=None)
     p.add_argument("--sigma-rot-deg", type=float, default=None)
-    p.add_argument("--sigma-turn", type=float, default=0.0, metavar="DEG",
-                   help="the likelihood's turn term (vlr identify --sigma-turn)")
+    p.add_argument("--sigma-turn", type=float, default=None, metavar="DEG",
+                   help="the likelihood's turn term (as vlr identify --sigma-turn)")
     p.add_argument("--nominal-theta-deg", type=float, nargs="+", default=None)
     p.add_argument("--prior-spread-deg", type=float, default=None)
     p.add_argument("--action-range-mm", type=float, nargs=2, default=None,

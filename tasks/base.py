@@ -74,8 +74,11 @@ class HandTaskEnv(gym.Env):
             `image_size` (height, width) [px].
         hardware_config: the hardware YAML file (backend "hardware").
         rolling: the filter's motion model with rolling contacts (`vlr.surface`), and with
-            it the backend's likelihood scales for rolling (`vlr.trial.ROLLING_SIGMA`), as
-            `vlr identify` has by default; False: pinned contacts at 0.5 mm / 1 degree.
+            it the backend's likelihood scales for rolling without the turn term
+            (`vlr.trial.ROLLING_SIGMA`, `vlr identify`'s default in sessions 8-16, at which
+            the tasks' figures in docs/TASKS.md were measured; `vlr identify` has since added
+            the turn term, not measured on the tasks); False: pinned contacts at 0.5 mm / 1
+            degree.
         nominal_theta_deg: the user's guess of the grasp's joint angles [deg], (proximal,
             distal) for every finger alike or per finger in the hand's order, as `vlr
             identify --nominal-theta-deg`; None: the generic guess

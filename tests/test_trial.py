@@ -1,6 +1,7 @@
 """vlr.trial: what a trial's world is made of, and settings that make no sense refused."""
 
 import math
+from pathlib import Path
 
 import pytest
 
@@ -128,13 +129,33 @@ def test_the_grasp_guess_follows_the_backend_and_an_explicit_one_wins():
     assert abs(world.nominal.theta - generic.nominal.theta).max() < 1e-3
 
 
-def test_likelihood_scales_follow_the_backend_and_the_contact_model():
-    # The sim's rolling filter takes the narrower ROLLING_SIGMA; pinned and the real hand keep
-    # DEFAULT_SIGMA; explicit scales win.
-    assert TrialSettings(backend="sim").sigma == (0.35, 0.7)
-    assert TrialSettings(backend="sim", rolling=False).sigma == (0.5, 1.0)
+def test_likelihood_scales_follow_the_backend_and_the_contact_model(tmp_path):
+    # The sim's rolling filter takes ROLLING_TURN_SIGMA (base scales and the turn term) when
+    # no scale is given; pinned and the real hand keep DEFAULT_SIGMA; explicit scales win,
+    # and scales given without a turn keep none (the meaning they had before the turn term).
+    sim = TrialSettings(backend="sim")
+    assert (sim.sigma, sim.turn_deg) == ((0.2, 0.4), 1.0)
+    assert (TrialSettings(backend="sim", rolling=False).sigma, TrialSettings(
+        backend="sim", rolling=False).turn_deg) == ((0.5, 1.0), 0.0)
     assert TrialSettings(backend="hardware").sigma == (0.5, 1.0)
-    assert TrialSettings(backend="sim", sigma_pos_mm=0.2).sigma == (0.2, 0.7)
+    assert TrialSettings(backend="hardware").turn_deg == 0.0
+    assert TrialSettings(backend="synthetic").turn_deg == 0.0
+    given = TrialSettings(backend="sim", sigma_pos_mm=0.2)
+    assert (given.sigma, given.turn_deg) == ((0.2, 0.7), 0.0)
+    off = TrialSettings(backend="sim", sigma_turn_deg=0)
+    assert (off.sigma, off.turn_deg) == ((0.35, 0.7), 0.0)
+    only_turn = TrialSettings(backend="sim", sigma_turn_deg=0.8)
+    assert (only_turn.sigma, only_turn.turn_deg) == ((0.2, 0.4), 0.8)
+    assert TrialSettings(backend="sim", sigma_motion=0.2).turn_deg == 0.0
+    # A hand without a thumb has no turn axis: no default turn, the scales without it.
+    hand = (Path(__file__).parents[1] / "models/hands/modelo.yaml").read_text()
+    spec = tmp_path / "thumbless.yaml"
+    spec.write_text(hand.replace("name: modelo", "name: thumbless")
+                    .replace("slot: thumb", "slot: opposer")
+                    .replace("finger: modelo", f"finger: {Path(__file__).parents[1]}"
+                             "/models/fingers/modelo.yaml"))
+    thumbless = TrialSettings(backend="sim", hand=str(spec))
+    assert (thumbless.sigma, thumbless.turn_deg) == ((0.35, 0.7), 0.0)
 
 
 def test_contact_stiffness_anneal_stages_and_link_scaling_reach_the_filter():

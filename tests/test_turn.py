@@ -98,4 +98,8 @@ def test_bad_turn_settings_are_named():
     hand = types.SimpleNamespace(names=("left", "thumb", "right"), finger_index=lambda n: 1)
     assert _turn(TrialSettings(sigma_turn_deg=0.8), hand) == {
         "sigma_turn": pytest.approx(np.radians(0.8)), "opposed": 1}
-    assert _turn(TrialSettings(), hand) == {}
+    assert _turn(TrialSettings(sigma_turn_deg=0), hand) == {}
+    assert _turn(TrialSettings(backend="synthetic"), hand) == {}
+    # The sim's default with rolling contacts (vlr.trial.ROLLING_TURN_SIGMA).
+    assert _turn(TrialSettings(backend="sim"), hand) == {
+        "sigma_turn": pytest.approx(np.radians(1.0)), "opposed": 1}

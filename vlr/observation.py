@@ -10,8 +10,9 @@ Noise model: independent Gaussians on the position error [m] and on the rotation
 R_obs^T R_pred [rad]. The scales are perception accuracy (about 0.05 mm and 0.2 degree,
 METHOD.md 8.2) plus model error; the defaults 0.5 mm and 1 degree are deliberately wider,
 because a likelihood narrower than the model-world gap makes the filter confidently wrong
-(trials in the sim with rolling contacts, whose gap is smaller, take 0.35 mm and 0.7 degree:
-`vlr.trial.ROLLING_SIGMA`).
+(trials in the sim with rolling contacts, whose gap is smaller, take 0.35 mm and 0.7 degree,
+`vlr.trial.ROLLING_SIGMA`, or by default 0.2 mm and 0.4 degree with the turn term below,
+`vlr.trial.ROLLING_TURN_SIGMA`).
 
 Process noise that grows with the action's size (issue #5, model term (c)): the model-world
 gap is a fraction of the motion an action causes (`vlr gap`'s per-action ratio), so with

@@ -37,15 +37,17 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "[N m/rad]; an unknown stiffness without one is drawn (vlr.trial)")
     p.add_argument("--sigma-pos-mm", type=float, help="likelihood position scale [mm] "
                    "(default per backend and contact model: vlr.trial.DEFAULT_SIGMA, "
-                   "ROLLING_SIGMA)")
+                   "ROLLING_SIGMA, ROLLING_TURN_SIGMA)")
     p.add_argument("--sigma-rot-deg", type=float, help="likelihood rotation scale [deg]")
     p.add_argument("--sigma-motion", type=float, default=0.0,
                    help="likelihood model error as a fraction of each particle's predicted "
                         "motion over the action (0: fixed scales)")
-    p.add_argument("--sigma-turn", type=float, default=0.0, metavar="DEG",
+    p.add_argument("--sigma-turn", type=float, default=None, metavar="DEG",
                    help="likelihood model error of the object's turn in its grip, about the "
                    "axis from the thumb to the other contacts [deg] (0: none); the base "
-                   "scales then cover what is left (vlr gap's 'rest')")
+                   "scales then cover what is left (vlr gap's 'rest'). Default: 1.0 in the "
+                   "sim with rolling contacts when no scale is given, with base scales 0.2 "
+                   "mm / 0.4 deg (vlr.trial.ROLLING_TURN_SIGMA); else none")
     p.add_argument("--nominal-theta-deg", type=float, nargs="+", metavar="DEG",
                    help="your guess of the grasp's joint angles: one per joint (every finger "
                    "alike), or one per joint of every finger in the hand's order (default: "
