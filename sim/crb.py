@@ -91,14 +91,16 @@ class CrbSettings:
 
 def replay_commands(record: dict, where: str) -> tuple[TrialSettings,
                                                        tuple[tuple[float, ...], ...]]:
-    """The settings and the reported tendon commands [m] of a finished trial's record (a
-    `vlr sweep` trial file: its "settings" and its result's `commands_mm_by_iteration`)."""
-    settings, result = record.get("settings"), record.get("result") or {}
+    """The settings and the reported tendon commands [m] of a finished trial's record: a
+    `vlr sweep` trial file (its "settings" and its result's `commands_mm_by_iteration`) or
+    the `result.json` of `vlr identify --out` (both at its top level)."""
+    settings = record.get("settings")
+    result = record.get("result") if isinstance(record.get("result"), dict) else record
     cmds = result.get("commands_mm_by_iteration")
     if not isinstance(settings, dict) or not cmds:
-        raise UserError(f"{where}: not a sweep trial record with its commands (a trial "
-                        "file under runs/SWEEP/trials/, written since the commands were "
-                        "recorded; re-run the trial)")
+        raise UserError(f"{where}: not a trial record with its commands (a sweep's "
+                        "runs/SWEEP/trials/*.json or vlr identify's result.json, written "
+                        "since the commands were recorded; re-run the trial)")
     u = np.asarray(cmds, dtype=float)
     if u.ndim != 2 or not np.isfinite(u).all():
         raise UserError(f"{where}: commands_mm_by_iteration must be rows of finite numbers")
@@ -307,8 +309,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "trial options below are then ignored)")
     p.add_argument("--replay", nargs="+", default=None, metavar="TRIAL",
                    help="bound along the actions finished trials took: `vlr sweep` trial "
-                   "files (runs/SWEEP/trials/*.json), with their own settings (the trial "
-                   "options below are then ignored)")
+                   "files (runs/SWEEP/trials/*.json) or `vlr identify`'s result.json, with "
+                   "their own settings (the trial options below are then ignored)")
     p.add_argument("--object", default="apple", help="object name or spec file")
     p.add_argument("--hand", default="modelo", help="the filter's hand (default modelo)")
     p.add_argument("--true-hand", default=None, help="the sim's hand when it differs")
@@ -375,7 +377,7 @@ def _replays(paths: list[str]) -> list[tuple[str, TrialSettings, tuple]]:
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise UserError(f"--replay {path}: not JSON ({exc})") from None
         if not isinstance(record, dict):
-            raise UserError(f"--replay {path}: not a sweep trial record")
+            raise UserError(f"--replay {path}: not a trial record")
         t, u = replay_commands(record, f"--replay {path}")
         out.append((str(record.get("case", "trial")), replace(t, particles=1000), u))
     return out

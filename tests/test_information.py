@@ -215,6 +215,12 @@ def test_replaying_a_trials_actions_gives_its_floor(tmp_path, capsys):
     assert replayed["actions"] == "replay" and len(replayed["by_action"]) == 4
     assert ([r["mean_width_deg"] for r in replayed["by_action"]]
             == pytest.approx([r["mean_width_deg"] for r in direct["by_action"]], rel=1e-6))
+    # `vlr identify --out`'s result.json has its settings and commands at the top level.
+    flat = tmp_path / "result.json"
+    flat.write_text(json.dumps(result))
+    assert main(["crb", "--replay", str(flat), "--json", str(out)]) == 0
+    assert ([r["mean_width_deg"] for r in json.loads(out.read_text())["by_action"]]
+            == pytest.approx([r["mean_width_deg"] for r in direct["by_action"]], rel=1e-6))
     # A record from another trial's grasp, or one without commands, is named.
     bad = json.loads(record.read_text())
     bad["result"]["commands_mm_by_iteration"][0][0] += 1.0
