@@ -174,6 +174,10 @@ def crb_report(s: CrbSettings) -> dict:
                 lost = k
                 break
             u = report_commands(report)
+            if s.replay and not np.allclose(u, s.replay[k], rtol=0, atol=1e-9):
+                raise UserError(f"the sim answered replayed action {k} with commands "
+                                f"{np.round(u, 6)}, the trial recorded {np.round(s.replay[k], 6)}"
+                                ": not the same trial")
             trace.act(u)
             rows.append(_row(trace, sigma, camera))
             if k == s.budget:
