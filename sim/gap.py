@@ -205,7 +205,9 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
         raise ValueError(f"friction {friction!r}: expected '', 'cone' or 'friction'")
     model = HandModel.from_spec(rec.hand_spec)
     obj = ObjectParams.from_spec(rec.object_spec)
-    thumb = model.finger_index("thumb") if "thumb" in model.names else 0
+    # The turn's axis runs from the thumb (`vlr.observation.grasp_turn`), as the filter's
+    # turn term does; a hand without one has no turn split (NaN), not another finger's.
+    thumb = model.finger_index("thumb") if "thumb" in model.names else None
     cfg = MotionConfig(terms=terms, rolling_substeps=settings.rolling_substeps,
                        spin_stiffness=settings.spin_stiffness,
                        contact_stiffness=settings.contact_stiffness)
@@ -223,7 +225,8 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
         st = _state(model, t0)
         status, _ = motion.solve(st, rec.commands[k], settle)
         p0, r0 = _pose(st)
-        v = grasp_turn(st.pos, st.rot, st.anchors, thumb)[0]
+        v = (grasp_turn(st.pos, st.rot, st.anchors, thumb)[0] if thumb is not None
+             else np.full(6, math.nan))
         static.append((float(np.linalg.norm(p0 - t0.position)),
                        _angle_deg(r0 @ t0.rotation.T),
                        float(np.degrees(np.abs(st.theta[0] - t0.theta)).mean())))
@@ -370,7 +373,7 @@ def format_report(rep: dict) -> str:
                      f"{t['orientation_deg_rms']:10.3f} {t['turn_error_deg_rms']:10.3f} "
                      f"{t['rest_position_mm_rms']:10.3f} {t['rest_orientation_deg_rms']:10.3f}")
     lines.append("turn: the object's turn about the grasp's axis (thumb to the other "
-                 "contacts); rest: the error left off it")
+                 "contacts; nan for a hand without a thumb); rest: the error left off it")
     return "\n".join(lines)
 
 

@@ -89,3 +89,21 @@ def test_bad_gap_settings_are_named(kw):
 def test_gap_cli_bad_json_folder(tmp_path, capsys):
     assert main(["gap", "--json", str(tmp_path / "missing" / "g.json")]) == 2
     assert "folder does not exist" in capsys.readouterr().err
+
+
+def test_a_hand_without_a_thumb_has_no_turn_split():
+    """The turn's axis runs from the thumb, as the filter's turn term does: a hand whose
+    slots name no thumb gets NaN, not another finger's axis."""
+    from dataclasses import replace
+
+    from sim.gap import _ALL, measure_gap, record_actions
+    from vlr.spec import load_hand
+
+    settings = GapSettings(object="apple", seed=0, actions=2, drift_actions=2)
+    rec = record_actions(settings)
+    spec = load_hand("modelo")
+    renamed = replace(spec, mounts=tuple(replace(m, slot="opposer" if m.slot == "thumb"
+                                                 else m.slot) for m in spec.mounts))
+    turn = measure_gap(replace(rec, hand_spec=renamed), _ALL, settings)["turn"]
+    assert np.isfinite(turn["orientation_deg_rms"])
+    assert np.isnan(turn["turn_error_deg_rms"]) and np.isnan(turn["rest_position_mm_rms"])
