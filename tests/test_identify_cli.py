@@ -16,6 +16,8 @@ def test_identify_synthetic_writes_result_history_and_plot(tmp_path):
     for key in ("converged", "iterations", "coverage", "timing"):
         assert key in result
     assert result["iterations"] == 3
+    # The likelihood in effect is recorded (the synthetic world has no turn term).
+    assert result["sigma"] == [0.1, 0.4] and result["sigma_turn_deg"] == 0.0
     assert {"proximal_deg_mean", "distal_deg_mean", "contact_mm_mean"} <= set(result["errors"])
     hist = np.load(out / "history.npz")
     assert hist["mean"].shape[0] == 4  # the initial update plus three actions
@@ -113,3 +115,15 @@ def test_identify_gives_up_clearly_when_the_tag_is_never_seen():
     with pytest.raises(GraspError, match="not seen in 30 frames"):
         identify(world, lambda: None, model, obj, nominal_grasp(model, obj, SyntheticConfig()),
                  IdentifyConfig())
+
+
+def test_identify_says_the_likelihood_in_effect():
+    from vlr.commands.identify import format_table
+
+    result = type("R", (), {"grasp_lost_at": None, "theta": {}, "unknowns": {}})()
+    summary = {"converged": False, "iterations": 0, "converged_at": None,
+               "timing": {"filter_s_per_iteration_median": 0.1}, "sigma": [0.2, 0.4],
+               "sigma_turn_deg": 1.0}
+    assert "likelihood: 0.2 mm / 0.4 deg + a 1 deg turn" in format_table(result, summary, None)
+    summary["sigma_turn_deg"] = 0.0
+    assert format_table(result, summary, None).endswith("likelihood: 0.2 mm / 0.4 deg")

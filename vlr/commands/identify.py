@@ -256,4 +256,8 @@ def format_table(result, summary: dict, model) -> str:
                      f"{summary.get('coverage_tolerant', float('nan')):.2f})")
     lines.append(f"filter: {summary['timing']['filter_s_per_iteration_median']:.3f} s per "
                  "iteration (median)")
+    if summary.get("sigma"):
+        turn = summary.get("sigma_turn_deg") or 0.0
+        lines.append(f"likelihood: {summary['sigma'][0]:g} mm / {summary['sigma'][1]:g} deg"
+                     + (f" + a {turn:g} deg turn in the grip" if turn else ""))
     return "\n".join(lines)
