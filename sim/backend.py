@@ -192,7 +192,8 @@ class SimHand:
             raise GraspError(f"{self._object.name}: no stable fingertip grasp after release: "
                              f"{message}")
         self._grasped = True
-        return ApplyReport(commands=self.commands, settled=settled, grasp_held=True)
+        return ApplyReport(commands=self.commands, settled=settled, grasp_held=True,
+                           tensions=self.static_tensions())
 
     def _close_to_tension(self) -> np.ndarray:
         """Close each tendon at `close_speed` until its static tension reaches the grasp
@@ -243,7 +244,7 @@ class SimHand:
         settled = self._settle()
         held, message = self._grasp_status()
         return ApplyReport(commands=self.commands, settled=settled, grasp_held=held,
-                           message=message)
+                           message=message, tensions=self.static_tensions())
 
     def grab_frame(self) -> Frame | None:
         """Render the palm camera (with the configured degradations), or None if dropped."""

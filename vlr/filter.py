@@ -503,12 +503,15 @@ class ParticleFilter:
 
     def _log_likelihood(self, state: ParticleState, observation: PoseObservation) -> np.ndarray:
         """Eq. 5 per particle; with `motion_fraction`, its scales grow with each particle's
-        predicted POM motion over the action (from `self._before`)."""
+        predicted POM motion over the action (from `self._before`); with `sigma_tension`,
+        each particle's predicted tendon tensions at the current command are weighed too."""
         motion = None
         if self._before is not None:
             pos0, rot0 = self._before
             motion = (np.linalg.norm(state.pos - pos0, axis=-1), rotation_angle(rot0, state.rot))
-        return self.obs_model.log_likelihood(state, observation, motion)
+        tensions = (self.motion.tensions(state, self.command)
+                    if self.obs_model.sigma_tension > 0 else None)
+        return self.obs_model.log_likelihood(state, observation, motion, tensions)
 
     def _move(self, idx: np.ndarray) -> ParticleState:
         """One resample-move stage (`FilterConfig.anneal_stages`): the particles `idx` (a

@@ -27,12 +27,17 @@ class ApplyReport:
         grasp_held: the object is still held by the fingertips (sim: from contacts; hardware:
             from the tag still being seen, or True when unknown).
         message: why the grasp failed, if it did ("" otherwise).
+        tensions: tendon tensions after the move [N], one per finger, where the hand can read
+            them (sim: each series spring's static tension, what a servo's current reading
+            settles to); None where it cannot (the hardware backend does not convert its
+            servos' present current yet).
     """
 
     commands: np.ndarray
     settled: bool
     grasp_held: bool
     message: str = ""
+    tensions: np.ndarray | None = None
 
 
 @dataclass(frozen=True)

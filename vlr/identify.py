@@ -22,12 +22,13 @@ from typing import Any, Protocol
 import numpy as np
 
 from vlr.active import ActiveExploration, choose_action
+from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
 from vlr.filter import FilterConfig, IterationRecord, ParticleFilter
 from vlr.hand import GraspError, report_commands
 from vlr.kinematics import HandModel, contact_in_distal, normals_from_angles
 from vlr.motion import ObjectParams
-from vlr.observation import PoseObservation
+from vlr.observation import PoseObservation, TensionedObservation
 from vlr.synthetic import NominalGrasp, Truth
 
 __all__ = ["ActingWorld", "IdentifyConfig", "Estimate", "Score", "IdentifyResult", "identify"]
@@ -180,7 +181,13 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
     pf = ParticleFilter(model, obj, cfg.filter)
     action_rng = np.random.default_rng(cfg.filter.seed + 1 if cfg.action_seed is None
                                        else cfg.action_seed)
-    u = report_commands(world.grasp())
+    report = world.grasp()
+    u = report_commands(report)
+    weigh_tensions = cfg.filter.observation.sigma_tension > 0
+    if weigh_tensions and getattr(report, "tensions", None) is None:
+        raise UserError("the likelihood weighs tendon tensions (sigma_tension), and this "
+                        "hand does not report them: set it to 0")
+    tensions = getattr(report, "tensions", None)
     center = u.copy()
     explore = ExplorationRange(low=cfg.action_range[0], high=cfg.action_range[1],
                                band=max(cfg.action_band, cfg.action_range[1]))
@@ -195,6 +202,8 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
     scores: list[Score] = []
     seconds: list[float] = []
     t0 = time.perf_counter()
+    if weigh_tensions:
+        obs = _with_tensions(obs, tensions)
     rec = pf.initialize(obs, u, nominal.theta, nominal.contact)
     seconds.append(time.perf_counter() - t0)
     converged_at = None
@@ -229,6 +238,8 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
             break
         u = report_commands(report)
         obs = observer()
+        if weigh_tensions and obs is not None:
+            obs = _with_tensions(obs, getattr(report, "tensions", None))
         t0 = time.perf_counter()
         rec = pf.step(u, obs)
         seconds.append(time.perf_counter() - t0)
@@ -239,6 +250,15 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
     if lost is not None:
         res.grasp_lost_at, res.grasp_message = lost
     return res
+
+
+def _with_tensions(obs: PoseObservation, tensions) -> PoseObservation:
+    """The pose with the hand's tendon tensions beside it (`TensionedObservation`); the pose
+    alone if the hand did not read them this time."""
+    if tensions is None:
+        return obs
+    return TensionedObservation(np.asarray(obs.position), np.asarray(obs.rotation),
+                                np.asarray(tensions, dtype=float))
 
 
 def _result(pf: ParticleFilter, iterations: int, converged_at: int | None,

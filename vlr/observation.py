@@ -39,6 +39,14 @@ particle's own contacts, `grasp_turn`). By Sherman-Morrison,
 
 so the base scales can be narrow (the camera plus what is left off the turn) while a turn of
 the size the model gets wrong costs little.
+
+Tendon tensions (session 17): where the hand reads each tendon's tension T (N,) [N] beside
+the pose (`TensionedObservation`; the sim's static tensions, `vlr.hand.ApplyReport`), with
+`sigma_tension` s_T > 0 the likelihood multiplies by independent Gaussians on each tension,
+-0.5 sum_i ((T_pred,i - T_i) / s_T)^2, T_pred the particle's own k_t max(0, u - s(theta))
+(Eq. 7 compliant, `vlr.motion.MotionModel.tensions`). The tension is the springs' torque
+through the pulleys, so it reads the joint angles directly, where the pose's information lies
+mostly along the object's turn (docs/RESULTS.md 2, "What would converge in 15").
 """
 
 from __future__ import annotations
@@ -52,8 +60,8 @@ from scipy.spatial.transform import Rotation
 from vlr.kinematics import HandModel, pom_from_contacts
 from vlr.motion import ParticleState
 
-__all__ = ["PoseObservation", "PomObservation", "ObservationModel", "rotation_angle",
-           "rotation_error", "grasp_turn", "pom_forward_kinematics"]
+__all__ = ["PoseObservation", "PomObservation", "TensionedObservation", "ObservationModel",
+           "rotation_angle", "rotation_error", "grasp_turn", "pom_forward_kinematics"]
 
 
 class PoseObservation(Protocol):
@@ -70,6 +78,16 @@ class PomObservation:
 
     position: np.ndarray
     rotation: np.ndarray
+
+
+@dataclass(frozen=True)
+class TensionedObservation:
+    """An observed POM pose with the hand's tendon tensions read at the same rest: position
+    (3,) [m], rotation (3, 3) R_PO, tensions (N,) [N] in the hand's finger order."""
+
+    position: np.ndarray
+    rotation: np.ndarray
+    tensions: np.ndarray
 
 
 def rotation_angle(r_a: np.ndarray, r_b: np.ndarray) -> np.ndarray:
@@ -131,6 +149,8 @@ class ObservationModel:
             docstring); 0 = no turn term.
         opposed: the finger opposing the others (the thumb's index), which sets the turn's
             axis.
+        sigma_tension: s_T, the scale of each tendon tension's error [N] (module docstring);
+            0 = tensions not weighed.
     """
 
     sigma_pos: float = 0.5e-3
@@ -138,6 +158,7 @@ class ObservationModel:
     motion_fraction: float = 0.0
     sigma_turn: float = 0.0
     opposed: int = 0
+    sigma_tension: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("sigma_pos", "sigma_rot"):
@@ -147,6 +168,8 @@ class ObservationModel:
             raise ValueError(f"motion_fraction {self.motion_fraction!r} must be >= 0")
         if not (np.isfinite(self.sigma_turn) and self.sigma_turn >= 0):
             raise ValueError(f"sigma_turn {self.sigma_turn!r} must be >= 0")
+        if not (np.isfinite(self.sigma_tension) and self.sigma_tension >= 0):
+            raise ValueError(f"sigma_tension {self.sigma_tension!r} must be >= 0")
         if self.sigma_turn > 0 and self.motion_fraction > 0:
             raise ValueError("sigma_turn and motion_fraction are two models of the same "
                              "error: set one")
@@ -164,25 +187,35 @@ class ObservationModel:
         return e_pos, e_rot
 
     def log_likelihood(self, state: ParticleState, obs: PoseObservation,
-                       motion: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+                       motion: tuple[np.ndarray, np.ndarray] | None = None,
+                       tensions: np.ndarray | None = None) -> np.ndarray:
         """log p(obs | particle) up to a constant (Eq. 5 with Gaussian noise), (P,);
         -inf for invalid particles, so a failed solve gets zero weight, never NaN.
 
         `motion`: each particle's predicted POM displacement [m] and rotation angle [rad]
-        over the action, (P,) each; used when `motion_fraction` > 0 (module docstring)."""
+        over the action, (P,) each; used when `motion_fraction` > 0 (module docstring).
+        `tensions`: each particle's predicted tendon tensions [N], (P, N); weighed against
+        the observation's when `sigma_tension` > 0 and it has them (module docstring)."""
+        ll = self._pose_log_likelihood(state, obs, motion)
+        observed = getattr(obs, "tensions", None)
+        if self.sigma_tension > 0 and tensions is not None and observed is not None:
+            r = (np.asarray(tensions) - np.asarray(observed)[None, :]) / self.sigma_tension
+            ll = ll - 0.5 * (r * r).sum(axis=-1)
+        return np.where(state.valid & np.isfinite(ll), ll, -np.inf)
+
+    def _pose_log_likelihood(self, state: ParticleState, obs: PoseObservation,
+                             motion: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
+        """The pose's term of `log_likelihood` (Eq. 5), (P,)."""
         if self.sigma_turn > 0:
-            ll = self._turn_log_likelihood(state, obs)
-            return np.where(state.valid & np.isfinite(ll), ll, -np.inf)
+            return self._turn_log_likelihood(state, obs)
         e_pos, e_rot = self.errors(state, obs)
         if self.motion_fraction > 0 and motion is not None:
             k = self.motion_fraction
             s_pos = np.sqrt(self.sigma_pos ** 2 + (k * np.asarray(motion[0])) ** 2)
             s_rot = np.sqrt(self.sigma_rot ** 2 + (k * np.asarray(motion[1])) ** 2)
-            ll = (-0.5 * ((e_pos / s_pos) ** 2 + (e_rot / s_rot) ** 2)
-                  - np.log(s_pos / self.sigma_pos) - np.log(s_rot / self.sigma_rot))
-        else:
-            ll = -0.5 * ((e_pos / self.sigma_pos) ** 2 + (e_rot / self.sigma_rot) ** 2)
-        return np.where(state.valid & np.isfinite(ll), ll, -np.inf)
+            return (-0.5 * ((e_pos / s_pos) ** 2 + (e_rot / s_rot) ** 2)
+                    - np.log(s_pos / self.sigma_pos) - np.log(s_rot / self.sigma_rot))
+        return -0.5 * ((e_pos / self.sigma_pos) ** 2 + (e_rot / self.sigma_rot) ** 2)
 
     def _turn_log_likelihood(self, state: ParticleState, obs: PoseObservation) -> np.ndarray:
         """Gaussian log-likelihood with the turn's covariance D + s^2 v v^T (module

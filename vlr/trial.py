@@ -105,6 +105,9 @@ class TrialSettings:
             (`turn_deg`): `ROLLING_TURN_SIGMA`'s turn with rolling contacts when neither base
             scale nor sigma_motion is given and the hand has a thumb, else none; so scales
             given alone keep the meaning they had before the turn term.
+        sigma_tension_n: weigh the hand's tendon tensions in the likelihood with this scale
+            [N] (`vlr.observation`, s_T); 0 = not weighed. The sim reports them; the hardware
+            backend does not yet.
         nominal_theta_deg: the user's guess of the grasp's joint angles [deg] (what one sees
             looking at the hand): K angles for every finger alike, or N x K, finger by
             finger in the hand's order (a thumb that wraps a thin object); None: the
@@ -165,6 +168,7 @@ class TrialSettings:
     sigma_rot_deg: float | None = None
     sigma_motion: float = 0.0
     sigma_turn_deg: float | None = None
+    sigma_tension_n: float = 0.0
     nominal_theta_deg: tuple[float, ...] | None = None
     prior_spread_deg: float | None = None
     rolling: bool | None = None
@@ -205,6 +209,8 @@ class TrialSettings:
         if self.sigma_turn_deg is not None and not (math.isfinite(self.sigma_turn_deg)
                                                     and self.sigma_turn_deg >= 0):
             raise UserError(f"sigma_turn_deg {self.sigma_turn_deg} must be >= 0")
+        if not (math.isfinite(self.sigma_tension_n) and self.sigma_tension_n >= 0):
+            raise UserError(f"sigma_tension_n {self.sigma_tension_n} must be >= 0")
         if self.sigma_turn_deg and self.sigma_motion > 0:
             raise UserError("sigma_turn_deg and sigma_motion model the same error: set one")
         if self.true_stiffness and self.backend != "synthetic":
@@ -271,7 +277,7 @@ class TrialSettings:
             if not is_int(getattr(self, name)):
                 raise bad(name, "an integer")
         for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg", "sigma_motion",
-                     "sigma_turn_deg",
+                     "sigma_turn_deg", "sigma_tension_n",
                      "slide_friction", "spin_friction", "active_model_error",
                      "active_min_force_n",
                      "contact_stiffness", "cone_return"):
@@ -562,6 +568,7 @@ def identify_config(settings: TrialSettings, model):
                         observation=ObservationModel(sigma_pos=sp * 1e-3,
                                                      sigma_rot=float(np.radians(sr)),
                                                      motion_fraction=settings.sigma_motion,
+                                                     sigma_tension=settings.sigma_tension_n,
                                                      **_turn(settings, model)))
     actions = {}
     if settings.action_range_mm is not None:

@@ -42,6 +42,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sigma-motion", type=float, default=0.0,
                    help="likelihood model error as a fraction of each particle's predicted "
                         "motion over the action (0: fixed scales)")
+    p.add_argument("--sigma-tension", type=float, default=0.0, metavar="N",
+                   help="weigh the hand's tendon tensions in the likelihood with this scale "
+                   "[N] (0: not weighed; the sim reports them, the hardware backend not yet)")
     p.add_argument("--sigma-turn", type=float, default=None, metavar="DEG",
                    help="likelihood model error of the object's turn in its grip, about the "
                    "axis from the thumb to the other contacts [deg] (0: none); the base "
@@ -167,7 +170,8 @@ def run(args: argparse.Namespace) -> int:
         true_stiffness=dict(args.true_stiffness), max_iterations=args.max_iterations,
         min_iterations=args.min_iterations, sigma_pos_mm=args.sigma_pos_mm,
         sigma_rot_deg=args.sigma_rot_deg, sigma_motion=args.sigma_motion,
-        sigma_turn_deg=args.sigma_turn, config=args.config,
+        sigma_turn_deg=args.sigma_turn, sigma_tension_n=args.sigma_tension,
+        config=args.config,
         nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg,
         rolling=args.rolling, slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, exploration=args.exploration,
