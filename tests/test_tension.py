@@ -1,0 +1,66 @@
+"""The hand's tendon tensions in the likelihood (`ObservationModel.sigma_tension`,
+`TrialSettings.sigma_tension_n`; issue #5): the term's arithmetic, that it is only weighed
+where the hand reads tensions, and that the sim reports them with every move."""
+
+import types
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from vlr.errors import UserError
+from vlr.observation import ObservationModel, PomObservation, TensionedObservation
+from vlr.trial import TrialSettings, run_trial
+
+
+def _particles(n: int = 5) -> types.SimpleNamespace:
+    rng = np.random.default_rng(0)
+    return types.SimpleNamespace(pos=rng.normal(size=(n, 3)) * 1e-4,
+                                 rot=Rotation.random(n, random_state=0).as_matrix(),
+                                 anchors=np.zeros((n, 3, 3)), valid=np.ones(n, bool))
+
+
+def test_tension_term_is_independent_gaussians_on_the_tensions():
+    st = _particles()
+    pose = PomObservation(np.zeros(3), st.rot[0])
+    observed = np.array([20.0, 12.0, 12.5])
+    obs = TensionedObservation(pose.position, pose.rotation, observed)
+    predicted = observed + np.array([[0, 0, 0], [0.5, 0, 0], [0, -1.0, 0.5], [2, 2, 2],
+                                     [0, 0, 0]])
+    om = ObservationModel(sigma_pos=2e-4, sigma_rot=0.007, sigma_tension=0.5)
+    pose_only = ObservationModel(sigma_pos=2e-4, sigma_rot=0.007).log_likelihood(st, pose)
+    ll = om.log_likelihood(st, obs, tensions=predicted)
+    expected = pose_only - 0.5 * (((predicted - observed) / 0.5) ** 2).sum(axis=1)
+    np.testing.assert_allclose(ll, expected)
+    # Without the hand's reading, or without the particles' predictions, only the pose counts.
+    np.testing.assert_allclose(om.log_likelihood(st, pose, tensions=predicted), pose_only)
+    np.testing.assert_allclose(om.log_likelihood(st, obs), pose_only)
+    # A failed solve (NaN tension) gets no weight.
+    predicted[4] = np.nan
+    assert om.log_likelihood(st, obs, tensions=predicted)[4] == -np.inf
+
+
+def test_bad_tension_settings_are_named():
+    with pytest.raises(ValueError, match="sigma_tension -1"):
+        ObservationModel(sigma_tension=-1.0)
+    with pytest.raises(UserError, match="sigma_tension_n -0.5"):
+        TrialSettings(sigma_tension_n=-0.5)
+    with pytest.raises(UserError, match="sigma_tension_n 'firm'"):
+        TrialSettings(sigma_tension_n="firm")
+    # The synthetic world reads no tensions: weighing them is refused, by name.
+    with pytest.raises(UserError, match="does not report them"):
+        run_trial(TrialSettings(backend="synthetic", particles=50, max_iterations=1,
+                                sigma_tension_n=0.5))
+
+
+def test_sim_trial_weighs_the_reported_tensions():
+    from sim.backend import SimHand
+
+    with SimHand(object="apple", seed=0) as hand:
+        report = hand.grasp()
+        assert report.tensions.shape == (3,) and np.all(report.tensions > 5.0)
+        moved = hand.apply(np.array([3e-4, 0.0, 0.0]))
+        np.testing.assert_allclose(moved.tensions, hand.static_tensions())
+    r = run_trial(TrialSettings(backend="sim", object="apple", particles=500,
+                                max_iterations=2, sigma_tension_n=0.5))
+    assert r["iterations"] == 2 and np.isfinite(r["errors"]["proximal_deg_mean"])
