@@ -12,7 +12,8 @@ each budget at the pose likelihood alone and with tensions at several sigma_T. B
 model's tension error against the sim's from the true state, per action (the same restart
 from the truth as `vlr gap`'s per-action measure, glued contacts re-settled): the floor
 only holds for a sigma_T above that. And the static gap: the model's equilibrium tension at
-the true state against the sim's, whose mean a filter would see as a bias.
+the true state against the sim's, whose mean a filter would see as a bias; and the tension
+error along the model's own path from the grasp's truth (a particle carries its own state).
 
     MUJOCO_GL=egl python docs/scripts/tension_floor.py --object apple --seed 0
 """
@@ -88,7 +89,10 @@ def main() -> None:
         explore = ExplorationRange(cfg.action_range[0], cfg.action_range[1],
                                    max(cfg.action_band, cfg.action_range[1]))
         center = u.copy()
-        gap, change, static = [], [], []
+        gap, change, static, own = [], [], [], []
+        # The model carrying its own state from the grasp's truth (as a particle does).
+        path = ParticleState.at_truth(pf.model, truth)
+        pf.motion.solve(path, u, init_motion_config(pf))
         print(f"{args.object}, seed {args.seed}: floor of the mean 95% joint interval [deg]; "
               f"pose at {args.sigma[0]} mm / {args.sigma[1]} deg + {args.sigma[2]} deg turn")
         print(f"{'actions':>7s} {'pose only':>10s}"
@@ -110,6 +114,8 @@ def main() -> None:
             pf.motion.solve(st, u_new, u_from=u)
             t_after = hand.static_tensions()
             gap.append((pf.motion.tensions(st, u_new)[0] - m_before) - (t_after - t_before))
+            pf.motion.solve(path, u_new, u_from=u)
+            own.append(pf.motion.tensions(path, u_new)[0] - t_after)
             change.append(t_after - t_before)
             u = u_new
             trace.act(u)
@@ -125,7 +131,8 @@ def main() -> None:
           f"model's error on it: RMS {np.sqrt((g ** 2).mean()):.3f} N "
           f"(per finger {np.round(np.sqrt((g ** 2).mean(axis=0)), 3)}); the model's static "
           f"tension at the true state against the sim's: mean {np.round(z.mean(axis=0), 3)}, "
-          f"SD {np.round(z.std(axis=0), 3)} N per finger")
+          f"SD {np.round(z.std(axis=0), 3)} N per finger; along the model's own path from "
+          f"the grasp: RMS {np.round(np.sqrt((np.array(own) ** 2).mean(axis=0)), 3)} N")
 
 
 if __name__ == "__main__":
