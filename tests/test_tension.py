@@ -3,6 +3,7 @@
 where the hand reads tensions, and that the sim reports them with every move."""
 
 import types
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -47,10 +48,20 @@ def test_bad_tension_settings_are_named():
         TrialSettings(sigma_tension_n=-0.5)
     with pytest.raises(UserError, match="sigma_tension_n 'firm'"):
         TrialSettings(sigma_tension_n="firm")
-    # The synthetic world reads no tensions: weighing them is refused, by name.
+    # The synthetic world and the real hand read no tensions: refused by name, before any
+    # hand moves; and by the loop itself for a hand that reports none.
+    for backend in ("synthetic", "hardware"):
+        with pytest.raises(UserError, match=f"the {backend} hand does not report"):
+            TrialSettings(backend=backend, sigma_tension_n=0.5)
+    from vlr.identify import IdentifyConfig, identify
+    from vlr.trial import open_world
+
+    w = open_world(TrialSettings(backend="synthetic", particles=50))
+    cfg = IdentifyConfig(max_iterations=1, filter=replace(
+        IdentifyConfig().filter, n_particles=50,
+        observation=ObservationModel(sigma_tension=0.5)))
     with pytest.raises(UserError, match="does not report them"):
-        run_trial(TrialSettings(backend="synthetic", particles=50, max_iterations=1,
-                                sigma_tension_n=0.5))
+        identify(w.world, w.observer, w.model, w.obj, w.nominal, cfg)
 
 
 def test_sim_trial_weighs_the_reported_tensions():

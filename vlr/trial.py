@@ -211,6 +211,9 @@ class TrialSettings:
             raise UserError(f"sigma_turn_deg {self.sigma_turn_deg} must be >= 0")
         if not (math.isfinite(self.sigma_tension_n) and self.sigma_tension_n >= 0):
             raise UserError(f"sigma_tension_n {self.sigma_tension_n} must be >= 0")
+        if self.sigma_tension_n and self.backend != "sim":
+            raise UserError(f"sigma_tension_n: the {self.backend} hand does not report tendon "
+                            "tensions (only the sim does so far): set it to 0")
         if self.sigma_turn_deg and self.sigma_motion > 0:
             raise UserError("sigma_turn_deg and sigma_motion model the same error: set one")
         if self.true_stiffness and self.backend != "synthetic":
