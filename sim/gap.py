@@ -16,7 +16,10 @@ the TRUE hand parameters, so that what remains is the model's own error:
   contact loads and places from action to action, as a filter's particle does);
 * the turn (`turn`): each per-action error split into the object's turn about the grasp's
   axis (`vlr.observation.grasp_turn`) and the rest, position and orientation: the scales of
-  the likelihood's `sigma_turn` and of its base.
+  the likelihood's `sigma_turn` and of its base;
+* the tendon tensions (`tension`): the model's error on each action's tension change against
+  the tensions the sim reports (`ApplyReport.tensions`), and at its settle on the true state:
+  the scale of the likelihood's `sigma_tension`.
 
 Each model term is switched on in turn (`LADDER`), so each one's share is a measured figure.
 This is a sim-only tool (it reads ground truth); the estimator never runs it.
@@ -27,7 +30,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -114,14 +117,16 @@ class GapSettings:
 
 @dataclass(frozen=True)
 class Recording:
-    """What the simulator did: commands u_0..u_n [m] and the true state after each
-    (`vlr.synthetic.Truth`, from `SimHand.scoring_truth`)."""
+    """What the simulator did: commands u_0..u_n [m], the true state after each
+    (`vlr.synthetic.Truth`, from `SimHand.scoring_truth`) and the tendon tensions it reported
+    (`ApplyReport.tensions`) [N]."""
 
     hand_spec: object
     object_spec: object
     commands: list[np.ndarray]
     truths: list
     dropped_at: int | None
+    tensions: list[np.ndarray] = field(default_factory=list)
 
 
 def record_actions(settings: GapSettings) -> Recording:
@@ -131,7 +136,8 @@ def record_actions(settings: GapSettings) -> Recording:
     from sim.backend import SimHand
 
     with SimHand(object=settings.object, hand=settings.hand, seed=settings.seed) as hand:
-        commands = [hand.grasp().commands]
+        grasp = hand.grasp()
+        commands, tensions = [grasp.commands], [grasp.tensions]
         truths = [hand.scoring_truth()]
         rng = np.random.default_rng(settings.seed + 1)  # vlr identify's action stream
         explore = ExplorationRange(settings.action_range[0], settings.action_range[1],
@@ -145,8 +151,9 @@ def record_actions(settings: GapSettings) -> Recording:
                 dropped = k
                 break
             commands.append(report.commands)
+            tensions.append(report.tensions)
             truths.append(t)
-        return Recording(hand.true_spec, hand.object_spec, commands, truths, dropped)
+        return Recording(hand.true_spec, hand.object_spec, commands, truths, dropped, tensions)
 
 
 def _state(model: HandModel, truth) -> ParticleState:
@@ -181,6 +188,25 @@ def _turn_split(v: np.ndarray, p0, r0, p1, r1, t0, t1) -> tuple[float, float, fl
     turn = float(e_r @ v[3:])
     return (math.degrees(turn), float(np.linalg.norm(e_p - turn * v[:3])) * 1e3,
             math.degrees(float(np.linalg.norm(e_r - turn * v[3:]))))
+
+
+def _tension_errors(rec: Recording, k: int, before: np.ndarray, after: np.ndarray) -> dict:
+    """The model's tendon tensions against the sim's over action k+1 (RMS over the fingers,
+    [N]): the error on their change, the sim's change, and the error of the model's tensions
+    at its settle on the true state (NaN without a recording of tensions)."""
+    if len(rec.tensions) <= k + 1 or rec.tensions[k] is None or rec.tensions[k + 1] is None:
+        return dict.fromkeys(("tension_change_error_n", "tension_change_n",
+                              "tension_static_error_n"), math.nan)
+    change = rec.tensions[k + 1] - rec.tensions[k]
+    return {"tension_change_error_n": _rms((after - before) - change),
+            "tension_change_n": _rms(change),
+            "tension_static_error_n": _rms(before - rec.tensions[k])}
+
+
+def _rms(values) -> float:
+    v = np.asarray(values, dtype=float)
+    v = v[np.isfinite(v)]
+    return float(np.sqrt(np.mean(v ** 2))) if v.size else math.nan
 
 
 def _turn_summary(rows: list[dict]) -> dict:
@@ -225,6 +251,7 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
         st = _state(model, t0)
         status, _ = motion.solve(st, rec.commands[k], settle)
         p0, r0 = _pose(st)
+        t_model0 = motion.tensions(st, rec.commands[k])[0]
         v = (grasp_turn(st.pos, st.rot, st.anchors, thumb)[0] if thumb is not None
              else np.full(6, math.nan))
         static.append((float(np.linalg.norm(p0 - t0.position)),
@@ -234,6 +261,7 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
         ok = bool(st.valid[0])
         p1, r1 = _pose(st)
         e_p, e_r, m_p, m_r = _motion_error(p0, r0, p1, r1, t0, t1)
+        tension = _tension_errors(rec, k, t_model0, motion.tensions(st, rec.commands[k + 1])[0])
         turn, rest_p, rest_r = _turn_split(v, p0, r0, p1, r1, t0, t1)
         rows.append({"action": k + 1, "ok": ok, "status": STATUS[int(status[0])],
                      "newton_iterations": int(iters[0]), "error_position_mm": e_p * 1e3,
@@ -242,7 +270,7 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
                      "motion_position_mm": m_p * 1e3,
                      "motion_orientation_deg": m_r,
                      "ratio_position": e_p / m_p if m_p > 0 else math.nan,
-                     "ratio_orientation": e_r / m_r if m_r > 0 else math.nan})
+                     "ratio_orientation": e_r / m_r if m_r > 0 else math.nan, **tension})
     ok_rows = [r for r in rows if r["ok"]]
 
     def stat(key: str, fn) -> float:
@@ -263,6 +291,9 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
         "error_orientation_deg_mean": stat("error_orientation_deg", np.mean),
         **drift,
         "turn": _turn_summary(ok_rows),
+        "tension": {key: _rms([r[key] for r in ok_rows])
+                    for key in ("tension_change_error_n", "tension_change_n",
+                                "tension_static_error_n")},
         "static": {"position_mm_mean": float(s[:, 0].mean() * 1e3),
                    "orientation_deg_mean": float(s[:, 1].mean()),
                    "joint_deg_mean": float(s[:, 2].mean())},
@@ -374,6 +405,15 @@ def format_report(rep: dict) -> str:
                      f"{t['rest_position_mm_rms']:10.3f} {t['rest_orientation_deg_rms']:10.3f}")
     lines.append("turn: the object's turn about the grasp's axis (thumb to the other "
                  "contacts; nan for a hand without a thumb); rest: the error left off it")
+    lines.append(f"{'tendon tensions, RMS [N]':28s} {'change err':>10s} {'change':>10s} "
+                 f"{'static err':>10s}")
+    for c in rep["configs"]:
+        t = c.get("tension", {})
+        lines.append(f"{c['name']:28s} {t.get('tension_change_error_n', math.nan):10.3f} "
+                     f"{t.get('tension_change_n', math.nan):10.3f} "
+                     f"{t.get('tension_static_error_n', math.nan):10.3f}")
+    lines.append("tensions: the model's error on each action's tension change (the sim's "
+                 "change beside it) and at its settle on the true state, RMS over the fingers")
     return "\n".join(lines)
 
 
