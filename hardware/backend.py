@@ -77,6 +77,8 @@ class HardwareHand:
         self._on_close = on_close
         self._closed = False
         self._stopped = ""  # why the hand was stopped, if it was
+        # Settled present currents [mA] per finger, signed so that pulling is positive.
+        self._currents: np.ndarray | None = None
         self._old_signals: dict[int, Any] = {}
         self.finger_ids = [f.id for f in config.fingers]
         self.bus = MotorBus(port or config.bus.port, config.bus.baud, labels=config.labels,
@@ -122,7 +124,8 @@ class HardwareHand:
         if not held:
             raise GraspError(f"no grasp at commands {np.round(self._u * 1e3, 2).tolist()} mm: "
                              f"{message}")
-        return ApplyReport(commands=self.commands, settled=settled, grasp_held=True)
+        return ApplyReport(commands=self.commands, settled=settled, grasp_held=True,
+                           tensions=self._tensions())
 
     def apply(self, delta: np.ndarray) -> ApplyReport:
         """Change the tendon commands by `delta` [m], clipped to motion.range, ramped; then
@@ -138,7 +141,7 @@ class HardwareHand:
             settled = self._move_to(target)
         held, message = self._grasp_status()
         return ApplyReport(commands=self.commands, settled=settled, grasp_held=held,
-                           message=message)
+                           message=message, tensions=self._tensions())
 
     def grab_frame(self) -> Frame | None:
         image = self.camera.read()
@@ -264,9 +267,26 @@ class HardwareHand:
             read_motion(self.bus, self.finger_ids, CURRENT_UNIT_MA)
             time.sleep(max(0.0, m.ramp_period - (time.monotonic() - t0)))
         self._u = np.asarray(target, dtype=float).copy()
-        settled, _ = wait_until_stopped(self.bus, self.finger_ids, m.settle_timeout,
-                                        m.settle_ticks, CURRENT_UNIT_MA)
+        settled, state = wait_until_stopped(self.bus, self.finger_ids, m.settle_timeout,
+                                            m.settle_ticks, CURRENT_UNIT_MA)
+        # Signed by each motor's pulling direction: a motor that pulls with negative ticks
+        # draws negative current under the same tension.
+        self._currents = np.array([f.direction * state.current_ma[f.id]
+                                   for f in self.config.fingers], dtype=float)
         return settled
+
+    def _tensions(self) -> np.ndarray | None:
+        """Tendon tensions [N] from the settled present currents (`TensionConfig`); None
+        without a tension calibration in the config."""
+        t = self.config.tension
+        if t is None or self._currents is None:
+            return None
+        return np.maximum(0.0, t.newton_per_ma * (self._currents - np.asarray(t.zero_ma)))
+
+    @property
+    def reads_tensions(self) -> bool:
+        """Whether each move reports tendon tensions (a `tension` section in the config)."""
+        return self.config.tension is not None
 
     @contextlib.contextmanager
     def _guarded(self) -> Iterator[None]:

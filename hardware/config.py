@@ -110,6 +110,24 @@ class CalibrationConfig:
 
 
 @dataclass(frozen=True)
+class TensionConfig:
+    """Tendon tension from each finger motor's present current once the motors stop,
+    T = newton_per_ma x (direction x current - zero_ma), at least 0 (`ApplyReport.tensions`; the
+    likelihood weighs them with `vlr identify --sigma-tension`). Both numbers come from the
+    user's own calibration against a load cell in the line: the gearbox's friction makes a
+    servo's current a rough tension sensor, and nothing here has been measured on a real hand
+    (docs/RESULTS.md 2, "What would converge in 15").
+
+    newton_per_ma: tendon tension per mA of present current [N/mA] (about 0.18 for an XM430
+    on a 10 mm spool, from its torque constant, before gear losses); zero_ma: the present
+    current at zero tension, per finger in hand slot order [mA].
+    """
+
+    newton_per_ma: float
+    zero_ma: tuple[float, ...]
+
+
+@dataclass(frozen=True)
 class GraspConfig:
     """commands: tendon commands u of a grasp [m], one per finger (hand slot order);
     check_tag: the grasp holds while the object's tag is seen (False: unknown, so True)."""
@@ -152,6 +170,7 @@ class HardwareConfig:
     spread: SpreadMotor | None = None
     calibration: CalibrationConfig = CalibrationConfig()
     emulator: EmulatorConfig = EmulatorConfig()
+    tension: TensionConfig | None = None
 
     @property
     def ids(self) -> tuple[int, ...]:
@@ -286,6 +305,7 @@ def load_config(path: str | Path) -> HardwareConfig:
     camera = _camera(top.section("camera"), base)
     calibration = _calibration(top.section("calibration", optional=True))
     emulator = _emulator(top.section("emulator", optional=True))
+    tension = _tension(top.section("tension", optional=True), len(fingers))
     top.done()
 
     ids = [f.id for f in fingers] + ([spread.id] if spread else [])
@@ -301,7 +321,8 @@ def load_config(path: str | Path) -> HardwareConfig:
                                   "come from the simulated hand in this process)")
     return HardwareConfig(path=path, hand=str(hand_name), object=object_name, bus=bus,
                           fingers=fingers, motion=motion, grasp=grasp, camera=camera,
-                          spread=spread, calibration=calibration, emulator=emulator)
+                          spread=spread, calibration=calibration, emulator=emulator,
+                          tension=tension)
 
 
 def _maybe_relative(name: str, base: Path) -> str:
@@ -418,6 +439,16 @@ def _calibration(s: _Section | None) -> CalibrationConfig:
         s.fail(s.key("taut_current_ma"), out.taut_current_ma,
                f"must be below calibration.current_ma = {out.current_ma} (the probe could "
                "never reach it)")
+    s.done()
+    return out
+
+
+def _tension(s: _Section | None, n_fingers: int) -> TensionConfig | None:
+    if s is None:
+        return None
+    out = TensionConfig(newton_per_ma=s.number("newton_per_ma", lo=0.0, hi=10.0,
+                                                strict_lo=True),
+                        zero_ma=s.numbers("zero_ma", n_fingers))
     s.done()
     return out
 

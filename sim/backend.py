@@ -282,6 +282,11 @@ class SimHand:
         """Tendon tensions [N] (positive = pulling)."""
         return -self.data.actuator_force[self._act].copy()
 
+    @property
+    def reads_tensions(self) -> bool:
+        """Every move reports the tendon tensions (`static_tensions`)."""
+        return True
+
     def static_tensions(self) -> np.ndarray:
         """Tendon tensions of the series spring alone, k_t max(0, u - s) [N]: the servo's
         damping adds transients while moving; this is what a current reading settles to."""

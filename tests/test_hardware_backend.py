@@ -16,7 +16,7 @@ from hardware.backend import HardwareHand, open_hand
 from hardware.bus import CommError, MotorFaultError, PortError
 from hardware.calibration import CalibrationError
 from hardware.camera import CameraError, FakeCamera, OpenCVCamera
-from hardware.control_table import HardwareError, Reg
+from hardware.control_table import CURRENT_UNIT_MA, HardwareError, Reg
 from hardware.tendons import TendonMap, resolve_zero
 from tests.hardware_fixtures import (
     CALIBRATION,
@@ -285,3 +285,33 @@ def test_a_camera_that_ignores_the_size_is_refused(monkeypatch):
     with pytest.raises(CameraError, match="delivers 320x240 frames, not the calibration's "
                                           "640x480"):
         OpenCVCamera(0, 640, 480).read()
+
+
+def test_tensions_from_the_settled_currents(tmp_path):
+    """With a `tension` calibration each move reports tendon tensions from the motors'
+    present current once they stop, T = newton_per_ma x (direction x current - zero_ma), at
+    least 0;
+    without one, none (and a trial that weighs tensions is refused before the hand moves)."""
+    from vlr.errors import UserError
+    from vlr.trial import TrialSettings, open_world
+
+    cfg = make_config(tmp_path, fingers=STORED,
+                      tension={"newton_per_ma": 0.18, "zero_ma": [5.0, 5.0, 5.0]})
+    with hand_on_emulator(cfg) as (hand, emu):
+        assert hand.reads_tensions
+        hand.grasp()
+        report = hand.apply(np.array([0.001, 0.0, 0.002]))
+        current = np.array([emu.register(i, Reg.PRESENT_CURRENT) for i in (1, 2, 3)],
+                           dtype=float)
+        current = np.where(current >= 2**15, current - 2**16, current) * CURRENT_UNIT_MA
+        pulling = current * np.array([1, -1, 1])  # the left motor pulls with negative ticks
+        np.testing.assert_allclose(report.tensions,
+                                   np.maximum(0.0, 0.18 * (pulling - 5.0)), atol=1e-9)
+        assert report.tensions.shape == (3,) and np.all(report.tensions > 1.0)
+    plain = make_config(tmp_path, fingers=STORED)
+    with hand_on_emulator(plain) as (hand, emu):
+        assert not hand.reads_tensions
+        assert hand.grasp().tensions is None
+    path = write_config(tmp_path, config_dict(fingers=STORED), "plain.yaml")
+    with pytest.raises(UserError, match="does not report tendon tensions"):
+        open_world(TrialSettings(backend="hardware", config=str(path), sigma_tension_n=0.5))

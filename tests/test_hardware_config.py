@@ -66,6 +66,11 @@ def _edit(section: str, key: str, value):
     (_edit("hand", "", "nohand"), r"hand = 'nohand': unknown hand"),
     (_edit("object", "", "banana"), r"object = 'banana': unknown object"),
     (_edit("motion", "", None), r"motion = None must be a mapping"),
+    (_edit("tension", "", {"newton_per_ma": 0, "zero_ma": [0, 0, 0]}),
+     r"tension.newton_per_ma = 0 must be > 0"),
+    (_edit("tension", "", {"newton_per_ma": 0.18, "zero_ma": [0, 0]}),
+     r"tension.zero_ma = \[0, 0\] must be a list of 3"),
+    (_edit("tension", "", {"newton_per_ma": 0.18}), r"tension.zero_ma"),
 ])
 def test_bad_values_are_named(tmp_path, data, message):
     path = write_config(tmp_path, data)

@@ -106,8 +106,8 @@ class TrialSettings:
             scale nor sigma_motion is given and the hand has a thumb, else none; so scales
             given alone keep the meaning they had before the turn term.
         sigma_tension_n: weigh the hand's tendon tensions in the likelihood with this scale
-            [N] (`vlr.observation`, s_T); 0 = not weighed. The sim reports them; the hardware
-            backend does not yet.
+            [N] (`vlr.observation`, s_T); 0 = not weighed. The sim reports them; the real
+            hand when its config has a `tension` calibration (hardware/README.md).
         nominal_theta_deg: the user's guess of the grasp's joint angles [deg] (what one sees
             looking at the hand): K angles for every finger alike, or N x K, finger by
             finger in the hand's order (a thumb that wraps a thin object); None: the
@@ -211,9 +211,9 @@ class TrialSettings:
             raise UserError(f"sigma_turn_deg {self.sigma_turn_deg} must be >= 0")
         if not (math.isfinite(self.sigma_tension_n) and self.sigma_tension_n >= 0):
             raise UserError(f"sigma_tension_n {self.sigma_tension_n} must be >= 0")
-        if self.sigma_tension_n and self.backend != "sim":
-            raise UserError(f"sigma_tension_n: the {self.backend} hand does not report tendon "
-                            "tensions (only the sim does so far): set it to 0")
+        if self.sigma_tension_n and self.backend == "synthetic":
+            raise UserError("sigma_tension_n: the synthetic world does not report tendon "
+                            "tensions: set it to 0")
         if self.sigma_turn_deg and self.sigma_motion > 0:
             raise UserError("sigma_turn_deg and sigma_motion model the same error: set one")
         if self.true_stiffness and self.backend != "synthetic":
@@ -511,6 +511,11 @@ def open_world(settings: TrialSettings) -> World:
             return None
         return observe(frame.image, hand.calibration, spec.tag_id, spec.tag_size)
 
+    if settings.sigma_tension_n and not getattr(hand, "reads_tensions", False):
+        hand.close()  # before the hand moves
+        raise UserError(f"sigma_tension_n: this {settings.backend} hand does not report "
+                        "tendon tensions (hardware: give its config a `tension` section, "
+                        "hardware/README.md): set it to 0")
     truth = getattr(hand, "scoring_truth", None)  # sim only; never given to the filter
     return World(hand, observer, truth, model, obj, nominal, hand_spec, spec, hand)
 

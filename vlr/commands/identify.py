@@ -44,7 +44,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "motion over the action (0: fixed scales)")
     p.add_argument("--sigma-tension", type=float, default=0.0, metavar="N",
                    help="weigh the hand's tendon tensions in the likelihood with this scale "
-                   "[N] (0: not weighed; the sim reports them, the hardware backend not yet)")
+                   "[N] (0: not weighed; the sim reports them, the real hand with a `tension` "
+                   "calibration in its config)")
     p.add_argument("--sigma-turn", type=float, default=None, metavar="DEG",
                    help="likelihood model error of the object's turn in its grip, about the "
                    "axis from the thumb to the other contacts [deg] (0: none); the base "
