@@ -29,8 +29,8 @@ class ApplyReport:
         message: why the grasp failed, if it did ("" otherwise).
         tensions: tendon tensions after the move [N], one per finger, where the hand can read
             them (sim: each series spring's static tension, what a servo's current reading
-            settles to); None where it cannot (the hardware backend does not convert its
-            servos' present current yet).
+            settles to; hardware: from the servos' settled present current, with a `tension`
+            calibration in its config); None where it cannot.
     """
 
     commands: np.ndarray
