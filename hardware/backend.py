@@ -269,18 +269,25 @@ class HardwareHand:
         self._u = np.asarray(target, dtype=float).copy()
         settled, state = wait_until_stopped(self.bus, self.finger_ids, m.settle_timeout,
                                             m.settle_ticks, CURRENT_UNIT_MA)
-        # Signed by each motor's pulling direction: a motor that pulls with negative ticks
-        # draws negative current under the same tension.
-        self._currents = np.array([f.direction * state.current_ma[f.id]
-                                   for f in self.config.fingers], dtype=float)
+        self._currents = self._pulling_currents(state)
         return settled
+
+    def _pulling_currents(self, state) -> np.ndarray:
+        """Present currents [mA] per finger, signed by each motor's pulling direction: a
+        motor that pulls with negative ticks draws negative current under the same
+        tension."""
+        return np.array([f.direction * state.current_ma[f.id] for f in self.config.fingers],
+                        dtype=float)
 
     def _tensions(self) -> np.ndarray | None:
         """Tendon tensions [N] from the settled present currents (`TensionConfig`); None
         without a tension calibration in the config."""
         t = self.config.tension
-        if t is None or self._currents is None:
+        if t is None:
             return None
+        if self._currents is None:  # no move yet (a grasp already at its commands)
+            self._currents = self._pulling_currents(
+                read_motion(self.bus, self.finger_ids, CURRENT_UNIT_MA))
         return np.maximum(0.0, t.newton_per_ma * (self._currents - np.asarray(t.zero_ma)))
 
     @property

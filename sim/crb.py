@@ -101,18 +101,22 @@ def replay_commands(record: dict, where: str) -> tuple[TrialSettings,
         raise UserError(f"{where}: not a trial record with its commands (a sweep's "
                         "runs/SWEEP/trials/*.json or vlr identify's result.json, written "
                         "since the commands were recorded; re-run the trial)")
-    u = np.asarray(cmds, dtype=float)
+    try:
+        u = np.asarray(cmds, dtype=float)
+    except (TypeError, ValueError):  # ragged rows or not numbers
+        u = np.empty(0)
     if u.ndim != 2 or not np.isfinite(u).all():
         raise UserError(f"{where}: commands_mm_by_iteration must be rows of finite numbers")
     return TrialSettings.from_dict(settings), tuple(map(tuple, u * 1e-3))
 
 
-def _bound(trace, sigma: tuple[float, float, float]):
-    """The trace's bound at scales (sigma_pos [m], sigma_rot [rad], sigma_turn [rad])."""
-    return trace.bound(sigma[0], sigma[1], sigma_turn=sigma[2])
+def _bound(trace, sigma: tuple[float, float, float, float]):
+    """The trace's bound at scales (sigma_pos [m], sigma_rot [rad], sigma_turn [rad],
+    sigma_tension [N]; 0 = no turn term, tensions not observed)."""
+    return trace.bound(sigma[0], sigma[1], sigma_turn=sigma[2], sigma_tension=sigma[3])
 
 
-def _scale_for(trace, sigma: tuple[float, float, float], target: float) -> float:
+def _scale_for(trace, sigma: tuple[float, ...], target: float) -> float:
     """The factor c for which scales c * sigma just give a mean width of `target` now: nan
     if no scales do (the prior's width left by unobserved directions stays above it), inf if
     any do."""
@@ -142,10 +146,13 @@ def crb_report(s: CrbSettings) -> dict:
     try:
         cfg = identify_config(ts, world.model)
         pf = ParticleFilter(world.model, world.obj, cfg.filter)
-        sigma = (ts.sigma[0] * 1e-3, math.radians(ts.sigma[1]), math.radians(ts.turn_deg))
-        camera = (CAMERA_SIGMA[0] * 1e-3, math.radians(CAMERA_SIGMA[1]), 0.0)
+        sigma = (ts.sigma[0] * 1e-3, math.radians(ts.sigma[1]), math.radians(ts.turn_deg),
+                 float(ts.sigma_tension_n))
+        # The camera's pose accuracy; tensions, where observed, at the trial's own scale.
+        camera = (CAMERA_SIGMA[0] * 1e-3, math.radians(CAMERA_SIGMA[1]), 0.0, sigma[3])
         u = report_commands(world.world.grasp())
-        if s.replay and not np.allclose(u, s.replay[0], rtol=0, atol=1e-9):
+        if s.replay and (len(s.replay[0]) != len(u)
+                         or not np.allclose(u, s.replay[0], rtol=0, atol=1e-9)):
             raise UserError(f"the replayed trial's grasp commands {np.round(s.replay[0], 6)} "
                             f"differ from the sim's {np.round(u, 6)}: not the same trial")
         truth = world.truth()
@@ -195,7 +202,7 @@ def crb_report(s: CrbSettings) -> dict:
         "actions": ("replay" if s.replay else "oracle" if s.candidates else "random"),
         "candidates": s.candidates,
         "sigma_pos_mm": ts.sigma[0], "sigma_rot_deg": ts.sigma[1],
-        "sigma_turn_deg": ts.turn_deg,
+        "sigma_turn_deg": ts.turn_deg, "sigma_tension_n": ts.sigma_tension_n,
         "camera_sigma": list(CAMERA_SIGMA), "prior_spread_deg": ts.grasp_guess[1],
         "relative_step": s.relative_step, "target_deg": s.target_deg,
         "grasp_lost_at": lost,
@@ -225,7 +232,7 @@ def _oracle(trace, rng, u, center, explore, k: int, sigma) -> np.ndarray:
     cands = [random_action(rng, u, center, explore) for _ in range(k)]
     best, best_w = cands[0], math.inf
     for d in cands:
-        b = trace.preview(u + d, sigma[0], sigma[1], sigma[2])
+        b = trace.preview(u + d, *sigma)
         if b is not None and b.mean_width_deg < best_w:
             best, best_w = d, b.mean_width_deg
     return best
@@ -240,6 +247,8 @@ def format_report(rep: dict) -> str:
             + f": floor of the mean 95% joint interval [deg] at the likelihood's "
             f"{rep['sigma_pos_mm']} mm / {rep['sigma_rot_deg']} deg"
             + (f" + a {rep['sigma_turn_deg']} deg turn" if rep.get("sigma_turn_deg") else "")
+            + (f" + tensions at {rep['sigma_tension_n']} N" if rep.get("sigma_tension_n")
+               else "")
             + " and at the camera's "
             f"{rep['camera_sigma'][0]} mm / {rep['camera_sigma'][1]} deg")
     lines = [head, f"{'actions':>8s} {'likelihood':>11s} {'camera':>8s}"
@@ -261,7 +270,9 @@ def format_report(rep: dict) -> str:
                      f"at most {c:.2f}x the likelihood's: {c * rep['sigma_pos_mm']:.3f} mm / "
                      f"{c * rep['sigma_rot_deg']:.3f} deg"
                      + (f" / a {c * rep['sigma_turn_deg']:.3f} deg turn"
-                        if rep.get("sigma_turn_deg") else ""))
+                        if rep.get("sigma_turn_deg") else "")
+                     + (f" / tensions {c * rep['sigma_tension_n']:.3f} N"
+                        if rep.get("sigma_tension_n") else ""))
     if rep["grasp_lost_at"]:
         lines.append(f"grasp lost at action {rep['grasp_lost_at']}")
     return "\n".join(lines)
@@ -329,6 +340,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--sigma-rot-deg", type=float, default=None)
     p.add_argument("--sigma-turn", type=float, default=None, metavar="DEG",
                    help="the likelihood's turn term (as vlr identify --sigma-turn)")
+    p.add_argument("--sigma-tension", type=float, default=0.0, metavar="N",
+                   help="tendon tensions observed at this scale (as vlr identify "
+                   "--sigma-tension; 0: not observed)")
     p.add_argument("--nominal-theta-deg", type=float, nargs="+", default=None)
     p.add_argument("--prior-spread-deg", type=float, default=None)
     p.add_argument("--action-range-mm", type=float, nargs=2, default=None,
@@ -360,6 +374,7 @@ def _trials(args: argparse.Namespace) -> list[tuple[str, TrialSettings]]:
         unknowns=tuple(args.unknown), seed=args.seed, particles=1000,
         max_iterations=args.actions, sigma_pos_mm=args.sigma_pos_mm,
         sigma_rot_deg=args.sigma_rot_deg, sigma_turn_deg=args.sigma_turn,
+        sigma_tension_n=args.sigma_tension,
         nominal_theta_deg=tuple(args.nominal_theta_deg) if args.nominal_theta_deg else None,
         prior_spread_deg=args.prior_spread_deg, slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, action_range_mm=args.action_range_mm,

@@ -102,6 +102,18 @@ def test_the_turn_term_is_the_dense_covariance_and_only_widens(synthetic_trace):
             == pytest.approx(trace.bound(sp, sr).mean_width_deg, rel=1e-6))
 
 
+def test_tension_observations_only_narrow_the_floor(synthetic_trace):
+    """`InformationTrace.bound(..., sigma_tension=)`: tendon tensions add information G^T G /
+    s_T^2; a vanishing weight (huge s_T) gives the pose's floor back."""
+    *_, trace, _ = synthetic_trace
+    sp, sr = 0.2e-3, np.radians(0.4)
+    pose = trace.bound(sp, sr).mean_width_deg
+    assert trace.bound(sp, sr, sigma_tension=0.5).mean_width_deg < 0.9 * pose
+    assert trace.bound(sp, sr, sigma_tension=1e6).mean_width_deg == pytest.approx(pose,
+                                                                                 rel=1e-6)
+    assert np.allclose(trace.info_tension, trace.info_tension.T)
+
+
 def test_apple_floor_is_above_the_criterion_at_the_likelihoods_scales():
     rep = crb_report(CrbSettings(trial=TrialSettings(backend="sim", object="apple", seed=0,
                                                      max_iterations=15)))
@@ -190,11 +202,12 @@ def test_the_scales_that_meet_the_criterion_are_found_or_said_to_be_none():
     from sim.crb import _scale_for
 
     def trace(floor: float):  # width = floor + 4 x the scale factor, as a bound behaves
-        return SimpleNamespace(bound=lambda sp, sr, sigma_turn=0.0: SimpleNamespace(
-            mean_width_deg=floor + 4.0 * sp / 1e-3))
+        return SimpleNamespace(bound=lambda sp, sr, sigma_turn=0.0, sigma_tension=0.0:
+                               SimpleNamespace(mean_width_deg=floor + 4.0 * sp / 1e-3))
 
-    assert _scale_for(trace(0.0), (1e-3, 0.01, 0.0), 2.0) == pytest.approx(0.5, rel=1e-6)
-    assert np.isnan(_scale_for(trace(3.0), (1e-3, 0.01, 0.0), 2.0))  # the prior is wider
+    sigma = (1e-3, 0.01, 0.0, 0.0)
+    assert _scale_for(trace(0.0), sigma, 2.0) == pytest.approx(0.5, rel=1e-6)
+    assert np.isnan(_scale_for(trace(3.0), sigma, 2.0))  # the prior is wider
 
 
 def test_replaying_a_trials_actions_gives_its_floor(tmp_path, capsys):
@@ -227,6 +240,12 @@ def test_replaying_a_trials_actions_gives_its_floor(tmp_path, capsys):
     record.write_text(json.dumps(bad))
     assert main(["crb", "--replay", str(record)]) == 2
     assert "not the same trial" in capsys.readouterr().err
+    for rows in ([[1.0, 2.0], [1.0]], [[1.0, 2.0]] * 4):  # ragged; two fingers of three
+        bad["result"]["commands_mm_by_iteration"] = rows
+        record.write_text(json.dumps(bad))
+        assert main(["crb", "--replay", str(record)]) == 2
+        err = capsys.readouterr().err
+        assert "rows of finite numbers" in err or "not the same trial" in err, err
     del bad["result"]["commands_mm_by_iteration"]
     record.write_text(json.dumps(bad))
     assert main(["crb", "--replay", str(record)]) == 2

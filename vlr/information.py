@@ -11,7 +11,9 @@ actions is
     J_t = P_0^-1 + sum_{s <= t} H_s^T R^-1 H_s,   H_s = dy_s / dx,
     R = diag(sigma_pos^2 I_3, sigma_rot^2 I_3),
 
-P_0 the prior's covariance (the filter's spreads; a uniform unknown's variance). With the
+P_0 the prior's covariance (the filter's spreads; a uniform unknown's variance). Where the
+likelihood also weighs the tendon tensions (`ObservationModel.sigma_tension` s_T), each
+observation adds G_s^T G_s / s_T^2, G_s = dT_s / dx the tensions' derivatives. With the
 likelihood's turn term (`ObservationModel.sigma_turn`) R_s = R + s^2 v_s v_s^T, v_s the
 grasp's turn at action s (`vlr.observation.grasp_turn`), and by Sherman-Morrison
 H^T R_s^-1 H = H^T R^-1 H - s^2 w w^T / (1 + s^2 v^T R^-1 v), w = H^T R^-1 v. The mean
@@ -130,6 +132,7 @@ class InformationTrace:
         self.opposed = pf.config.observation.opposed
         self._jacobians: list[np.ndarray] = []
         self._turns: list[np.ndarray] = []
+        self.info_tension = np.zeros((d, d))  # sum of G_s^T G_s (module docstring)
         self._add(st)
 
     @property
@@ -176,16 +179,21 @@ class InformationTrace:
         d = self.dims
         return int((self.state.valid[1:d + 1] != self.state.valid[d + 1:]).sum())
 
-    def _observation(self, st: ParticleState) -> tuple[np.ndarray, np.ndarray]:
-        """H (6, D) of the POM pose at `st` and the grasp's turn v (6,) there."""
+    def _observation(self, st: ParticleState,
+                     command: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """H (6, D) of the POM pose at `st`, the grasp's turn v (6,) there, and G (N, D) of
+        the tendon tensions at `command`."""
         jp, jr = self.pose_jacobian(st)
         v = grasp_turn(st.pos[:1], st.rot[:1], st.anchors[:1], self.opposed)[0]
-        return np.vstack([jp, jr]), v
+        t = self.pf.motion.tensions(st, command)
+        a, b, span = self._pairs(st)
+        return np.vstack([jp, jr]), v, (t[a] - t[b]).T / span
 
     def _add(self, st: ParticleState) -> None:
-        h, v = self._observation(st)
+        h, v, g = self._observation(st, self.command)
         self.info_pos += h[:3].T @ h[:3]
         self.info_rot += h[3:].T @ h[3:]
+        self.info_tension += g.T @ g
         self._jacobians.append(h)
         self._turns.append(v)
 
@@ -222,11 +230,13 @@ class InformationTrace:
         self._add(self.state)
 
     def bound(self, sigma_pos: float, sigma_rot: float,
-              extra: tuple[np.ndarray, np.ndarray] | None = None,
-              st: ParticleState | None = None, sigma_turn: float = 0.0) -> Bound:
-        """The bound now at scales sigma_pos [m], sigma_rot [rad] and the turn's sigma_turn
-        [rad] (module docstring). `extra`, `st`: H (6, D) and the turn v (6,) of a previewed
-        action, and its state."""
+              extra: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None,
+              st: ParticleState | None = None, sigma_turn: float = 0.0,
+              sigma_tension: float = 0.0) -> Bound:
+        """The bound now at scales sigma_pos [m], sigma_rot [rad], the turn's sigma_turn
+        [rad] and the tensions' sigma_tension [N] (0: tensions not observed; module
+        docstring). `extra`, `st`: H (6, D), the turn v (6,) and the tensions' G (N, D) of a
+        previewed action, and its state."""
         ip = self.info_pos if extra is None else self.info_pos + extra[0][:3].T @ extra[0][:3]
         ir = self.info_rot if extra is None else self.info_rot + extra[0][3:].T @ extra[0][3:]
         info = np.eye(self.dims) + ip / sigma_pos**2 + ir / sigma_rot**2
@@ -236,6 +246,9 @@ class InformationTrace:
                 h = np.concatenate([h, extra[0][None]])
                 v = np.concatenate([v, extra[1][None]])
             info -= self._turn_information(h, v, sigma_pos, sigma_rot, sigma_turn)
+        if sigma_tension > 0:
+            it = self.info_tension if extra is None else self.info_tension + extra[2].T @ extra[2]
+            info += it / sigma_tension**2
         g = self.output_jacobian(st)
         cov = g @ np.linalg.solve(info, g.T)
         sd = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -245,7 +258,7 @@ class InformationTrace:
                      sd[n_th:])
 
     def preview(self, command: np.ndarray, sigma_pos: float, sigma_rot: float,
-                sigma_turn: float = 0.0) -> Bound | None:
+                sigma_turn: float = 0.0, sigma_tension: float = 0.0) -> Bound | None:
         """The bound if the next action went to `command` (the trace unchanged); None if a
         solve failed."""
         st = self.state.copy()
@@ -254,4 +267,6 @@ class InformationTrace:
             self._check(st, status, "preview")
         except FloatingPointError:
             return None
-        return self.bound(sigma_pos, sigma_rot, self._observation(st), st, sigma_turn)
+        command = np.asarray(command, float)
+        return self.bound(sigma_pos, sigma_rot, self._observation(st, command), st, sigma_turn,
+                          sigma_tension)

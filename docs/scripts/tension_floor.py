@@ -5,15 +5,16 @@ The filter observes the POM pose only (the paper's camera). A Dynamixel reports 
 current, so the real hand could also read each tendon's tension; the sim has it
 (`SimHand.static_tensions`, the series spring's k_t x stretch, what a current reading
 settles to) and the filter's model predicts it (`MotionModel.tensions`, Eq. 7 compliant).
-This probe adds tension observations with scale sigma_T [N] to `vlr crb`'s information
-(`vlr.information.InformationTrace`, the same central differences, here of the tensions)
-along the seed's random actions, and prints the floor of the mean 95% joint interval after
-each budget at the pose likelihood alone and with tensions at several sigma_T. Beside it, the
-model's tension error against the sim's from the true state, per action (the same restart
-from the truth as `vlr gap`'s per-action measure, glued contacts re-settled): the floor
-only holds for a sigma_T above that. And the static gap: the model's equilibrium tension at
-the true state against the sim's, whose mean a filter would see as a bias; and the tension
-error along the model's own path from the grasp's truth (a particle carries its own state).
+This probe bounds the filter with tension observations of scale sigma_T [N] added to the
+pose's (`vlr.information.InformationTrace.bound(..., sigma_tension=)`, the same central
+differences, of the tensions) along the seed's random actions, and prints the floor of the
+mean 95% joint interval after each budget at the pose likelihood alone and with tensions at
+several sigma_T. Beside it, the model's tension error against the sim's from the true state,
+per action (the same restart from the truth as `vlr gap`'s per-action measure, glued
+contacts re-settled): the floor only holds for a sigma_T above that. And the static gap: the
+model's equilibrium tension at the true state against the sim's, whose mean a filter would
+see as a bias; and the tension error along the model's own path from the grasp's truth (a
+particle carries its own state).
 
     MUJOCO_GL=egl python docs/scripts/tension_floor.py --object apple --seed 0
 """
@@ -28,33 +29,9 @@ import numpy as np
 from vlr.explore import ExplorationRange, random_action
 from vlr.filter import ParticleFilter
 from vlr.hand import report_commands
-from vlr.information import WIDTH_95, InformationTrace, init_motion_config, truth_vector
+from vlr.information import InformationTrace, init_motion_config, truth_vector
 from vlr.motion import ParticleState
 from vlr.trial import TrialSettings, identify_config, open_world
-
-
-def tension_jacobian(trace: InformationTrace) -> np.ndarray:
-    """(N, D) d tension / dv at the trace's state and command (central differences)."""
-    st = trace.state
-    t = trace.pf.motion.tensions(st, trace.command)
-    a, b, span = trace._pairs(st)
-    return (t[a] - t[b]).T / span
-
-
-def floor(trace: InformationTrace, sigma: tuple, info_t: np.ndarray,
-          sigma_t: float | None) -> float:
-    """The mean 95% joint interval's floor [deg] with tension information (None: without)."""
-    info = (np.eye(trace.dims) + trace.info_pos / sigma[0] ** 2
-            + trace.info_rot / sigma[1] ** 2)
-    if sigma[2] > 0:
-        info -= trace._turn_information(np.array(trace._jacobians), np.array(trace._turns),
-                                        *sigma)
-    if sigma_t is not None:
-        info += info_t / sigma_t ** 2
-    g = trace.output_jacobian()
-    cov = g @ np.linalg.solve(info, g.T)
-    n_th = trace.pf.model.n_fingers * trace.pf.model.n_joints
-    return float(np.degrees(WIDTH_95 * np.sqrt(np.maximum(np.diag(cov)[:n_th], 0))).mean())
 
 
 def main() -> None:
@@ -82,9 +59,11 @@ def main() -> None:
         truth = world.truth()
         trace = InformationTrace(pf, truth_vector(pf, truth), truth.position, truth.rotation,
                                  u)
-        info_t = np.zeros((trace.dims, trace.dims))
-        h = tension_jacobian(trace)
-        info_t += h.T @ h
+
+        def floor(sigma_t: float) -> float:
+            """The mean 95% joint interval's floor [deg] now, tensions at sigma_t [N]."""
+            return trace.bound(*sigma[:2], sigma_turn=sigma[2],
+                               sigma_tension=sigma_t).mean_width_deg
         rng = np.random.default_rng(ts.seed + 1)
         explore = ExplorationRange(cfg.action_range[0], cfg.action_range[1],
                                    max(cfg.action_band, cfg.action_range[1]))
@@ -119,10 +98,8 @@ def main() -> None:
             change.append(t_after - t_before)
             u = u_new
             trace.act(u)
-            h = tension_jacobian(trace)
-            info_t += h.T @ h
-            print(f"{k:7d} {floor(trace, sigma, info_t, None):10.2f}"
-                  + "".join(f" {floor(trace, sigma, info_t, s):10.2f}" for s in args.sigma_t),
+            print(f"{k:7d} {floor(0.0):10.2f}"
+                  + "".join(f" {floor(s):10.2f}" for s in args.sigma_t),
                   flush=True)
     finally:
         world.close()
