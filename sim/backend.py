@@ -54,6 +54,11 @@ class SimOptions:
         settle_window: consecutive quiet steps required.
         overrides: true physical parameters differing from the nominal spec, as
             {"<slot>.<joint>.stiffness": N m/rad} (the hand then has an unknown spring).
+        tension_noise_n: standard deviation of each tendon tension the hand reports with a
+            move (`ApplyReport.tensions`) [N]; 0 reports the series spring's exact tension.
+            A servo's current reads through its gearbox; an XM430's current unit is about
+            0.5 N of tension on a 10 mm spool (hardware/README.md). Drawn from a stream of
+            its own, so the camera's degradations stay the same numbers.
     """
 
     width: int = 640
@@ -68,8 +73,13 @@ class SimOptions:
     settle_objvel: float = 2e-4
     settle_window: int = 30
     overrides: dict[str, float] = field(default_factory=dict)
+    tension_noise_n: float = 0.0
 
     def __post_init__(self) -> None:
+        noise = self.tension_noise_n
+        if (isinstance(noise, bool) or not isinstance(noise, (int, float))
+                or not (np.isfinite(noise) and noise >= 0)):
+            raise SpecError(f"SimOptions.tension_noise_n = {noise!r} must be a number >= 0 [N]")
         for name in ("width", "height"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or not 16 <= v <= 8192:
@@ -124,6 +134,7 @@ class SimHand:
         self.model = built.model
         self.data = mujoco.MjData(self.model)
         self.rng = np.random.default_rng(seed)
+        self._tension_rng = np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(1,)))
         self.seed = seed
         self._slots = self._true.finger_names
         m = self.model
@@ -193,7 +204,7 @@ class SimHand:
                              f"{message}")
         self._grasped = True
         return ApplyReport(commands=self.commands, settled=settled, grasp_held=True,
-                           tensions=self.static_tensions())
+                           tensions=self.read_tensions())
 
     def _close_to_tension(self) -> np.ndarray:
         """Close each tendon at `close_speed` until its static tension reaches the grasp
@@ -244,7 +255,7 @@ class SimHand:
         settled = self._settle()
         held, message = self._grasp_status()
         return ApplyReport(commands=self.commands, settled=settled, grasp_held=held,
-                           message=message, tensions=self.static_tensions())
+                           message=message, tensions=self.read_tensions())
 
     def grab_frame(self) -> Frame | None:
         """Render the palm camera (with the configured degradations), or None if dropped."""
@@ -286,6 +297,15 @@ class SimHand:
     def reads_tensions(self) -> bool:
         """Every move reports the tendon tensions (`static_tensions`)."""
         return True
+
+    def read_tensions(self) -> np.ndarray:
+        """The tendon tensions as the hand reads them with a move [N]: `static_tensions`
+        with `SimOptions.tension_noise_n` of Gaussian noise (never below 0)."""
+        exact = self.static_tensions()
+        if self.options.tension_noise_n == 0:
+            return exact
+        noise = self._tension_rng.normal(0.0, self.options.tension_noise_n, exact.shape)
+        return np.maximum(exact + noise, 0.0)
 
     def static_tensions(self) -> np.ndarray:
         """Tendon tensions of the series spring alone, k_t max(0, u - s) [N]: the servo's

@@ -74,3 +74,30 @@ def test_sim_trial_weighs_the_reported_tensions():
     r = run_trial(TrialSettings(backend="sim", object="apple", particles=500,
                                 max_iterations=2, sigma_tension_n=0.5))
     assert r["iterations"] == 2 and np.isfinite(r["errors"]["proximal_deg_mean"])
+
+
+def test_sim_tension_noise_is_seeded_and_only_in_the_reading():
+    from sim.backend import SimHand, SimOptions
+    from vlr.spec import SpecError
+
+    def readings(seed: int, noise: float):
+        with SimHand(object="apple", seed=seed,
+                     options=SimOptions(tension_noise_n=noise)) as hand:
+            hand.grasp()
+            moved = hand.apply(np.array([3e-4, 0.0, 0.0]))
+            return moved.tensions, hand.static_tensions()
+
+    exact, spring = readings(0, 0.0)
+    np.testing.assert_allclose(exact, spring)
+    noisy, spring_noisy = readings(0, 0.5)
+    np.testing.assert_allclose(spring_noisy, spring)  # the physics is untouched
+    assert 0.01 < np.max(np.abs(noisy - spring)) < 3.0
+    np.testing.assert_array_equal(readings(0, 0.5)[0], noisy)  # the same seed, the same
+    # Another seed, other noise on the same physics (the seed moves only the sensors).
+    assert not np.allclose(readings(1, 0.5)[0] - spring, noisy - spring)
+    with pytest.raises(SpecError, match="tension_noise_n = -1"):
+        SimOptions(tension_noise_n=-1.0)
+    with pytest.raises(UserError, match="tension_noise_n is the sim's"):
+        TrialSettings(backend="synthetic", tension_noise_n=0.5)
+    with pytest.raises(UserError, match="tension_noise_n 'loud'"):
+        TrialSettings(tension_noise_n="loud")

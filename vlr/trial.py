@@ -108,6 +108,8 @@ class TrialSettings:
         sigma_tension_n: weigh the hand's tendon tensions in the likelihood with this scale
             [N] (`vlr.observation`, s_T); 0 = not weighed. The sim reports them; the real
             hand when its config has a `tension` calibration (hardware/README.md).
+        tension_noise_n: sim only: the standard deviation of the sim's tension readings [N]
+            (`sim.backend.SimOptions.tension_noise_n`); 0: exact (the series spring's).
         nominal_theta_deg: the user's guess of the grasp's joint angles [deg] (what one sees
             looking at the hand): K angles for every finger alike, or N x K, finger by
             finger in the hand's order (a thumb that wraps a thin object); None: the
@@ -169,6 +171,7 @@ class TrialSettings:
     sigma_motion: float = 0.0
     sigma_turn_deg: float | None = None
     sigma_tension_n: float = 0.0
+    tension_noise_n: float = 0.0
     nominal_theta_deg: tuple[float, ...] | None = None
     prior_spread_deg: float | None = None
     rolling: bool | None = None
@@ -214,6 +217,11 @@ class TrialSettings:
         if self.sigma_tension_n and self.backend == "synthetic":
             raise UserError("sigma_tension_n: the synthetic world does not report tendon "
                             "tensions: set it to 0")
+        if not (math.isfinite(self.tension_noise_n) and self.tension_noise_n >= 0):
+            raise UserError(f"tension_noise_n {self.tension_noise_n} must be >= 0")
+        if self.tension_noise_n and self.backend != "sim":
+            raise UserError(f"tension_noise_n is the sim's: the {self.backend} hand's "
+                            "tensions are what they are: set it to 0")
         if self.sigma_turn_deg and self.sigma_motion > 0:
             raise UserError("sigma_turn_deg and sigma_motion model the same error: set one")
         if self.true_stiffness and self.backend != "synthetic":
@@ -280,7 +288,7 @@ class TrialSettings:
             if not is_int(getattr(self, name)):
                 raise bad(name, "an integer")
         for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg", "sigma_motion",
-                     "sigma_turn_deg", "sigma_tension_n",
+                     "sigma_turn_deg", "sigma_tension_n", "tension_noise_n",
                      "slide_friction", "spin_friction", "active_model_error",
                      "active_min_force_n",
                      "contact_stiffness", "cone_return"):
@@ -490,6 +498,8 @@ def open_world(settings: TrialSettings) -> World:
     from vlr.perception import observe
 
     options = {"config": settings.config} if settings.config else {}
+    if settings.tension_noise_n:
+        options["tension_noise_n"] = settings.tension_noise_n
     # The sim may be built with another hand than the filter's (true_hand: replaced fingers
     # or springs that the filter identifies as unknowns); the filter keeps `hand_spec`.
     hand = open_backend(settings.backend, object=settings.object,

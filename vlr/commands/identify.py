@@ -46,6 +46,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="weigh the hand's tendon tensions in the likelihood with this scale "
                    "[N] (0: not weighed; the sim reports them, the real hand with a `tension` "
                    "calibration in its config)")
+    p.add_argument("--tension-noise", type=float, default=0.0, metavar="N",
+                   help="sim only: the standard deviation of its tension readings [N] "
+                   "(default 0: the series spring's exact tension)")
     p.add_argument("--sigma-turn", type=float, default=None, metavar="DEG",
                    help="likelihood model error of the object's turn in its grip, about the "
                    "axis from the thumb to the other contacts [deg] (0: none); the base "
@@ -172,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
         min_iterations=args.min_iterations, sigma_pos_mm=args.sigma_pos_mm,
         sigma_rot_deg=args.sigma_rot_deg, sigma_motion=args.sigma_motion,
         sigma_turn_deg=args.sigma_turn, sigma_tension_n=args.sigma_tension,
-        config=args.config,
+        tension_noise_n=args.tension_noise, config=args.config,
         nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg,
         rolling=args.rolling, slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, exploration=args.exploration,
@@ -265,4 +268,9 @@ def format_table(result, summary: dict, model) -> str:
         turn = summary.get("sigma_turn_deg") or 0.0
         lines.append(f"likelihood: {summary['sigma'][0]:g} mm / {summary['sigma'][1]:g} deg"
                      + (f" + a {turn:g} deg turn in the grip" if turn else ""))
+        settings = summary.get("settings", {})
+        if settings.get("sigma_tension_n"):
+            noise = settings.get("tension_noise_n") or 0.0
+            lines.append(f"tensions weighed at {settings['sigma_tension_n']:g} N"
+                         + (f" (the sim's readings {noise:g} N noisy)" if noise else ""))
     return "\n".join(lines)
