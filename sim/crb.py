@@ -345,6 +345,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "--sigma-tension; 0: not observed)")
     p.add_argument("--nominal-theta-deg", type=float, nargs="+", default=None)
     p.add_argument("--prior-spread-deg", type=float, default=None)
+    p.add_argument("--contact-spread-deg", type=float, default=None,
+                   help="the contact angles' prior spread (as vlr identify)")
     p.add_argument("--action-range-mm", type=float, nargs=2, default=None,
                    metavar=("LOW", "HIGH"), help="as vlr identify (default 0.2 0.4)")
     p.add_argument("--action-band-mm", type=float, default=None, metavar="B",
@@ -376,7 +378,8 @@ def _trials(args: argparse.Namespace) -> list[tuple[str, TrialSettings]]:
         sigma_rot_deg=args.sigma_rot_deg, sigma_turn_deg=args.sigma_turn,
         sigma_tension_n=args.sigma_tension,
         nominal_theta_deg=tuple(args.nominal_theta_deg) if args.nominal_theta_deg else None,
-        prior_spread_deg=args.prior_spread_deg, slide_friction=args.slide_friction,
+        prior_spread_deg=args.prior_spread_deg, contact_spread_deg=args.contact_spread_deg,
+        slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, action_range_mm=args.action_range_mm,
         action_band_mm=args.action_band_mm))]
 

@@ -70,7 +70,8 @@ def test_motion_scaled_model_error_runs_a_trial_and_refuses_a_negative_fraction(
     assert summary["sigma"] == [0.1, 0.4]
     # the guess in effect, where the settings say None (the synthetic world's generic one)
     assert summary["settings"]["nominal_theta_deg"] is None
-    assert summary["grasp_guess"] == {"nominal_theta_deg": None, "prior_spread_deg": 3.0}
+    assert summary["grasp_guess"] == {"nominal_theta_deg": None, "prior_spread_deg": 3.0,
+                                      "contact_spread_deg": pytest.approx(8.594, abs=1e-3)}
     with pytest.raises(UserError, match="sigma_motion -1"):
         TrialSettings(sigma_motion=-1.0)
     with pytest.raises(UserError, match="sigma_motion 'big'"):
@@ -158,7 +159,7 @@ def test_likelihood_scales_follow_the_backend_and_the_contact_model(tmp_path):
     assert (thumbless.sigma, thumbless.turn_deg) == ((0.35, 0.7), 0.0)
 
 
-def test_contact_stiffness_anneal_stages_and_link_scaling_reach_the_filter():
+def test_contact_stiffness_anneal_stages_link_scaling_and_priors_reach_the_filter():
     from vlr.filter import FilterConfig
     from vlr.kinematics import HandModel
     from vlr.motion import MotionConfig
@@ -184,7 +185,14 @@ def test_contact_stiffness_anneal_stages_and_link_scaling_reach_the_filter():
     narrow = identify_config(TrialSettings(backend="synthetic", particles=50, jitter_h=0.1),
                              model).filter
     assert narrow.jitter_h == 0.1
-    for bad, match in ((dict(link_scaling="yes"), "link_scaling 'yes'"),
+    assert default.contact_spread == FilterConfig.contact_spread
+    wide = identify_config(TrialSettings(backend="synthetic", particles=50,
+                                         contact_spread_deg=35.0), model).filter
+    assert wide.contact_spread == pytest.approx(math.radians(35.0))
+    for bad, match in ((dict(contact_spread_deg=0.0), "contact_spread_deg 0.0"),
+                       (dict(contact_spread_deg=120.0), "contact_spread_deg 120.0"),
+                       (dict(contact_spread_deg="wide"), "contact_spread_deg 'wide'"),
+(dict(link_scaling="yes"), "link_scaling 'yes'"),
                        (dict(jitter_h=1.0), "jitter_h 1.0"),
                        (dict(jitter_h="wide"), "jitter_h 'wide'"),
                        (dict(contact_stiffness=0.0), "contact_stiffness 0.0"),

@@ -119,6 +119,9 @@ class TrialSettings:
             motion model (vlr.synthetic.nominal_grasp).
         prior_spread_deg: prior std of the joint angles about the nominal grasp [deg];
             None: the backend's default (`GUESS_DEFAULT`: the sim 10, the others 3).
+        contact_spread_deg: prior std of each pad contact's two angles (alpha in the
+            finger's plane, beta out of it) about the pad's inner face [deg]
+            (`vlr.filter.FilterConfig.contact_spread`); None: the filter's default (8.6).
         rolling: rolling contacts in the filter's motion model (vlr.surface; measured by
             `vlr gap`, docs/RESULTS.md), and in the synthetic world's, which is that model.
             None: the backend's default (`ROLLING_DEFAULT`): rolling on the sim and the real
@@ -174,6 +177,7 @@ class TrialSettings:
     tension_noise_n: float = 0.0
     nominal_theta_deg: tuple[float, ...] | None = None
     prior_spread_deg: float | None = None
+    contact_spread_deg: float | None = None
     rolling: bool | None = None
     slide_friction: float | None = None
     spin_friction: float = 0.0
@@ -252,6 +256,8 @@ class TrialSettings:
             raise UserError(f"contact_stiffness {self.contact_stiffness} N/m must be > 0")
         if self.prior_spread_deg is not None and not self.prior_spread_deg > 0:
             raise UserError(f"prior_spread_deg {self.prior_spread_deg} must be > 0")
+        if self.contact_spread_deg is not None and not 0 < self.contact_spread_deg <= 90:
+            raise UserError(f"contact_spread_deg {self.contact_spread_deg} must be in (0, 90]")
         object.__setattr__(self, "unknowns", tuple(self.unknowns))
         if self.nominal_theta_deg is not None:
             object.__setattr__(self, "nominal_theta_deg",
@@ -287,7 +293,8 @@ class TrialSettings:
         for name in ("particles", "seed", "max_iterations", "min_iterations", "anneal_stages"):
             if not is_int(getattr(self, name)):
                 raise bad(name, "an integer")
-        for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg", "sigma_motion",
+        for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg", "contact_spread_deg",
+                     "sigma_motion",
                      "sigma_turn_deg", "sigma_tension_n", "tension_noise_n",
                      "slide_friction", "spin_friction", "active_model_error",
                      "active_min_force_n",
@@ -296,6 +303,7 @@ class TrialSettings:
             if not (is_real(v) or (v is None and name in ("sigma_pos_mm", "sigma_rot_deg",
                                                           "sigma_turn_deg",
                                                           "prior_spread_deg",
+                                                          "contact_spread_deg",
                                                           "slide_friction",
                                                           "contact_stiffness",
                                                           "cone_return"))):
@@ -581,6 +589,8 @@ def identify_config(settings: TrialSettings, model):
                         unknowns=settings.unknowns,
                         theta_spread=float(np.radians(settings.grasp_guess[1])),
                         anneal_stages=settings.anneal_stages,
+                        **({} if settings.contact_spread_deg is None
+                           else {"contact_spread": math.radians(settings.contact_spread_deg)}),
                         **({} if settings.jitter_h is None
                            else {"jitter_h": float(settings.jitter_h)}),
                         observation=ObservationModel(sigma_pos=sp * 1e-3,
@@ -650,7 +660,8 @@ def identify_trial(settings: TrialSettings, progress: Callable | None = None,
     summary["sigma_turn_deg"] = settings.turn_deg  # in effect, [deg]; 0 = no turn term
     guess, spread = settings.grasp_guess          # in effect (None: the backend's default)
     summary["grasp_guess"] = {"nominal_theta_deg": None if guess is None else list(guess),
-                              "prior_spread_deg": float(spread)}
+                              "prior_spread_deg": float(spread),
+                              "contact_spread_deg": math.degrees(cfg.filter.contact_spread)}
     if hasattr(w.world, "regrasps"):  # synthetic: truths drawn again for sitting at a fold
         summary["world_regrasps"] = int(w.world.regrasps)
     return TrialRun(summary, result, w.model, truths)

@@ -62,6 +62,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--prior-spread-deg", type=float, default=None,
                    help="prior std of the joint angles about the nominal grasp [deg] "
                    "(default: the backend's: 10 on the sim, 3 otherwise)")
+    p.add_argument("--contact-spread-deg", type=float, default=None,
+                   help="prior std of each pad contact's two angles about the pad's inner "
+                   "face [deg] (default 8.6, vlr.filter.FilterConfig.contact_spread)")
     p.add_argument("--rolling", action=argparse.BooleanOptionalAction, default=None,
                    help="rolling contacts in the filter's motion model, or pinned ones with "
                    "--no-rolling (default: the backend's, vlr.trial.ROLLING_DEFAULT: rolling on "
@@ -177,7 +180,8 @@ def run(args: argparse.Namespace) -> int:
         sigma_turn_deg=args.sigma_turn, sigma_tension_n=args.sigma_tension,
         tension_noise_n=args.tension_noise, config=args.config,
         nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg,
-        rolling=args.rolling, slide_friction=args.slide_friction,
+        contact_spread_deg=args.contact_spread_deg, rolling=args.rolling,
+        slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, exploration=args.exploration,
         active_model_error=args.active_model_error,
         active_criterion=args.active_criterion, active_min_force_n=args.active_min_force,
