@@ -71,7 +71,8 @@ def test_motion_scaled_model_error_runs_a_trial_and_refuses_a_negative_fraction(
     # the guess in effect, where the settings say None (the synthetic world's generic one)
     assert summary["settings"]["nominal_theta_deg"] is None
     assert summary["grasp_guess"] == {"nominal_theta_deg": None, "prior_spread_deg": 3.0,
-                                      "contact_spread_deg": pytest.approx(8.594, abs=1e-3)}
+                                      "contact_spread_deg": pytest.approx(8.594, abs=1e-3),
+                                      "contact_prior": "pad"}
     with pytest.raises(UserError, match="sigma_motion -1"):
         TrialSettings(sigma_motion=-1.0)
     with pytest.raises(UserError, match="sigma_motion 'big'"):

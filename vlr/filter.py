@@ -23,6 +23,7 @@ import numpy as np
 from vlr.kinematics import HandModel, angles_from_normals, normals_from_angles
 from vlr.motion import MotionConfig, MotionModel, ObjectParams, ParticleState
 from vlr.observation import ObservationModel, PoseObservation, rotation_angle
+from vlr.surface import surface_contact_normals
 
 __all__ = [
     "Unknown",
@@ -191,6 +192,8 @@ def interval_width_deg(theta_samples: np.ndarray) -> float:
 
 # --------------------------------------------------------------------------- config and records
 
+CONTACT_PRIORS = ("pad", "surface")
+
 # A prior of which no particle settles at the grasp command is drawn again this many times in
 # all: a small filter's unlucky draw (1000 particles in a task's check) is not a lost grasp.
 PRIOR_DRAWS = 3
@@ -205,6 +208,11 @@ class FilterConfig:
         seed: seed of the filter's np.random.Generator (all its randomness).
         theta_spread: prior std of the joint angles about the nominal grasp [rad].
         contact_spread: prior std of the pad contact angles (alpha, beta) [rad].
+        contact_prior: what the contact angles are drawn about: "pad", the nominal grasp's
+            contacts (the pad's inner face unless the guess says otherwise); "surface",
+            where each particle's own pads would touch an object of the local surface's
+            shape (`vlr.surface.surface_contact_normals`: a sphere's or a cylinder's radius,
+            a box's faces, oriented by the observed POM), for three fingers; else "pad".
         unknowns: unknown-parameter specs (`parse_unknown`).
         priors: optional uniform prior (low, high) per unknown spec.
         ess_fraction: tempering keeps ESS >= this fraction of P after weighting.
@@ -239,6 +247,7 @@ class FilterConfig:
     seed: int = 0
     theta_spread: float = float(np.radians(3.0))
     contact_spread: float = 0.15
+    contact_prior: str = "pad"
     unknowns: tuple[str, ...] = ()
     priors: dict[str, tuple[float, float]] = field(default_factory=dict)
     ess_fraction: float = 0.1
@@ -253,6 +262,9 @@ class FilterConfig:
     anneal_stages: int = 1
 
     def __post_init__(self) -> None:
+        if self.contact_prior not in CONTACT_PRIORS:
+            raise ValueError(f"contact_prior {self.contact_prior!r}: expected one of "
+                             f"{CONTACT_PRIORS}")
         if isinstance(self.anneal_stages, bool) or not (
                 isinstance(self.anneal_stages, int) and self.anneal_stages >= 1):
             raise ValueError(f"anneal_stages {self.anneal_stages!r} must be an integer >= 1")
@@ -399,11 +411,18 @@ class ParticleFilter:
                                       np.asarray(observation.position, dtype=float),
                                       np.asarray(observation.rotation, dtype=float))
         state.theta += rng.normal(0.0, cfg.theta_spread, state.theta.shape)
-        ab = np.asarray(nominal_contact, dtype=float)[None] + rng.normal(
-            0.0, cfg.contact_spread, (p, nf, 2))
-        state.normals[...] = normals_from_angles(ab[..., 0], ab[..., 1])
+        spread = rng.normal(0.0, cfg.contact_spread, (p, nf, 2))
         for u in self.unknowns:
             _set_unknown(state, u, rng.uniform(u.prior[0], u.prior[1], p))
+        centre = np.asarray(nominal_contact, dtype=float)[None]
+        if cfg.contact_prior == "surface":
+            # After the unknowns: a link's length moves its pad.
+            normals = surface_contact_normals(m, self.motion.obj.surface, state.theta,
+                                              state.segments, state.rot)
+            if normals is not None:
+                centre = np.stack(angles_from_normals(normals), axis=-1)
+        ab = centre + spread
+        state.normals[...] = normals_from_angles(ab[..., 0], ab[..., 1])
         state.anchor_to_pose(m)
         self.state = state
         self.command = np.asarray(command, dtype=float).copy()

@@ -156,3 +156,69 @@ def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
     return (np.ascontiguousarray(new_normals / np.linalg.norm(new_normals, axis=-1,
                                                                keepdims=True)),
             np.ascontiguousarray(new_anchors))
+
+
+def surface_contact_normals(model: HandModel, surface: LocalSurface, theta: np.ndarray,
+                            segments: np.ndarray, rot: np.ndarray) -> np.ndarray | None:
+    """(P, N, 3) pad normals in D where each particle's pads would touch one object of the
+    local surface's shape, or None where that shape does not fix them (not three fingers).
+
+    A prior for the contacts that follows each particle's own fingers (`ParticleFilter`'s
+    "surface" contact prior): a pad of radius r touching a sphere of radius rho has its centre
+    rho + r from the sphere's centre, and its contact on the line between the two centres; so
+    the three pad centres c_i fix the sphere's centre o (|o - c_i| = rho + r_i, the root on
+    the side the pads' inner faces look to), and each contact normal is (o - c_i) / |o - c_i|.
+    A cylinder is the same problem in the plane across its axis (the axis's direction from
+    the observed POM rotation `rot`, its radius known; three points over-fix the 2-D centre,
+    so the two difference equations alone place it). A box's pads lie on its faces: each
+    pad's normal is minus the outward face normal it looks at. Only the object's local
+    surface (kind, radius, axis in O: `LocalSurface.from_spec`) and the observed POM rotation
+    are used, never the object's placement.
+
+    Args:
+        theta: (P, N, K) joint angles [rad]; segments: (P, N, K) (`vlr.kinematics`).
+        rot: (P, 3, 3) or (3, 3) the observed POM rotation R_PO.
+    """
+    theta = np.asarray(theta, dtype=float)
+    p, n = theta.shape[:2]
+    if n != 3:
+        return None
+    rot = np.broadcast_to(np.asarray(rot, dtype=float), (p, 3, 3))
+    rd = _distal_rotations(model, theta)                           # (P, N, 3, 3) R_PD
+    c = contact_points(model, theta, np.zeros(theta.shape[:2] + (3,)), segments)
+    inner = rd[..., 1]                                             # each pad's +y_D in P
+    if surface.kind == "plane":
+        faces = np.concatenate([rot, -rot], axis=-1)               # (P, 3, 6) outward normals
+        facing = np.einsum("pna,pak->pnk", inner, faces)
+        best = np.argmin(facing, axis=-1)                          # the face a pad looks at
+        n_palm = -np.take_along_axis(faces.transpose(0, 2, 1)[:, None], best[..., None, None],
+                                     axis=2)[:, :, 0]
+    else:
+        rho = surface.radius + model.pad_radius[None, :]           # (1, N)
+        if surface.kind == "cylinder":
+            axis = np.einsum("pab,b->pa", rot, np.asarray(surface.axis, dtype=float))
+            c = c - np.einsum("pna,pa->pn", c, axis)[..., None] * axis[:, None]
+        # |o - c_i|^2 = rho_i^2, less the first: 2 (c_i - c_0) . o = b_i (two planes).
+        a_mat = 2.0 * (c[:, 1:] - c[:, :1])                         # (P, 2, 3)
+        b = (np.sum(c[:, 1:] ** 2, -1) - np.sum(c[:, :1] ** 2, -1)
+             - rho[:, 1:] ** 2 + rho[:, :1] ** 2)                   # (P, 2)
+        # Their least-norm solution o0 plus a line along m, the normal of the pad centres'
+        # plane (of the cross-axis plane for a cylinder, where o lies in it).
+        o0 = np.einsum("pij,pj->pi", np.linalg.pinv(a_mat), b)
+        m = np.cross(a_mat[:, 0], a_mat[:, 1])
+        m /= np.maximum(np.linalg.norm(m, axis=-1, keepdims=True), 1e-12)
+        if surface.kind == "sphere":
+            # |o0 + t m - c_0|^2 = rho_0^2; the root on the side the inner faces look to.
+            d0 = o0 - c[:, 0]
+            half_b = np.sum(d0 * m, -1)
+            disc = half_b ** 2 - (np.sum(d0 * d0, -1) - rho[:, 0] ** 2)
+            side = np.sign(np.einsum("pna,pa->p", inner, m))
+            side = np.where(side == 0, 1.0, side)
+            t = -half_b + side * np.sqrt(np.maximum(disc, 0.0))
+            o = o0 + t[:, None] * m
+        else:
+            o = o0 - np.einsum("pa,pa->p", o0, axis)[:, None] * axis   # in the cross plane
+        d = o[:, None, :] - c
+        n_palm = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
+    n_d = np.einsum("pnba,pnb->pna", rd, n_palm)
+    return n_d / np.linalg.norm(n_d, axis=-1, keepdims=True)

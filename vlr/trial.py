@@ -64,6 +64,10 @@ TRUE_STIFFNESS_RANGE = (0.5, 2.0)
 # as the sim's do; other backends default to rolling too.
 ROLLING_DEFAULT = {"synthetic": False, "sim": True, "hardware": True}
 
+# What the filter draws the pad contacts about when a trial does not say (`contact_prior`):
+# the pad's inner face.
+CONTACT_PRIOR_DEFAULT = {"synthetic": "pad", "sim": "pad", "hardware": "pad"}
+
 # The grasp guess (joint angles [deg], every finger alike) and the prior's spread [deg] when
 # a trial gives none, per backend. The synthetic world grasps at the generic guess
 # (`vlr.synthetic.SyntheticConfig.grasp_theta`, None here), so that guess is right there. The
@@ -122,6 +126,10 @@ class TrialSettings:
         contact_spread_deg: prior std of each pad contact's two angles (alpha in the
             finger's plane, beta out of it) about the pad's inner face [deg]
             (`vlr.filter.FilterConfig.contact_spread`); None: the filter's default (8.6).
+        contact_prior: what the contact angles are drawn about: "pad" (the pad's inner
+            face) or "surface" (where each particle's pads would touch an object of the
+            local surface's shape, `vlr.filter.FilterConfig.contact_prior`); None: the
+            backend's default (`CONTACT_PRIOR_DEFAULT`).
         rolling: rolling contacts in the filter's motion model (vlr.surface; measured by
             `vlr gap`, docs/RESULTS.md), and in the synthetic world's, which is that model.
             None: the backend's default (`ROLLING_DEFAULT`): rolling on the sim and the real
@@ -178,6 +186,7 @@ class TrialSettings:
     nominal_theta_deg: tuple[float, ...] | None = None
     prior_spread_deg: float | None = None
     contact_spread_deg: float | None = None
+    contact_prior: str | None = None
     rolling: bool | None = None
     slide_friction: float | None = None
     spin_friction: float = 0.0
@@ -317,6 +326,8 @@ class TrialSettings:
             raise bad("rolling", "true or false (or none: the backend's default)")
         if self.exploration not in ("random", "active"):
             raise UserError(f"exploration {self.exploration!r}: expected random or active")
+        if self.contact_prior not in (None, "pad", "surface"):
+            raise UserError(f"contact_prior {self.contact_prior!r}: expected pad or surface")
         if not 0 <= self.active_model_error < 10:
             raise UserError(f"active_model_error {self.active_model_error} must be in [0, 10)")
         if not 0 <= self.active_min_force_n < 100:
@@ -401,6 +412,13 @@ class TrialSettings:
         if self.nominal_theta_deg is not None:
             guess = self.nominal_theta_deg
         return guess, spread if self.prior_spread_deg is None else self.prior_spread_deg
+
+    @property
+    def contact_prior_in_effect(self) -> str:
+        """The contact prior in effect: `contact_prior`, or the backend's default."""
+        if self.contact_prior is not None:
+            return self.contact_prior
+        return CONTACT_PRIOR_DEFAULT.get(self.backend, "pad")
 
     @property
     def uses_rolling(self) -> bool:
@@ -589,6 +607,7 @@ def identify_config(settings: TrialSettings, model):
                         unknowns=settings.unknowns,
                         theta_spread=float(np.radians(settings.grasp_guess[1])),
                         anneal_stages=settings.anneal_stages,
+                        contact_prior=settings.contact_prior_in_effect,
                         **({} if settings.contact_spread_deg is None
                            else {"contact_spread": math.radians(settings.contact_spread_deg)}),
                         **({} if settings.jitter_h is None
@@ -661,7 +680,8 @@ def identify_trial(settings: TrialSettings, progress: Callable | None = None,
     guess, spread = settings.grasp_guess          # in effect (None: the backend's default)
     summary["grasp_guess"] = {"nominal_theta_deg": None if guess is None else list(guess),
                               "prior_spread_deg": float(spread),
-                              "contact_spread_deg": math.degrees(cfg.filter.contact_spread)}
+                              "contact_spread_deg": math.degrees(cfg.filter.contact_spread),
+                              "contact_prior": cfg.filter.contact_prior}
     if hasattr(w.world, "regrasps"):  # synthetic: truths drawn again for sitting at a fold
         summary["world_regrasps"] = int(w.world.regrasps)
     return TrialRun(summary, result, w.model, truths)

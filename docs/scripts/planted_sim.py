@@ -13,13 +13,13 @@ particle's and the filter's joint errors. Ground truth starts the planted partic
 the filter never sees it.
 
     MUJOCO_GL=egl python docs/scripts/planted_sim.py --object wine_glass --seed 1 \
-        --particles 10000 --actions 20 [--sigma-tension 0.5] [--anneal-stages N] [--jitter-h H]
+        --particles 10000 --actions 20 [--sigma-tension 0.5] [--anneal-stages N] [--jitter-h H] \
+        [--contact-spread-deg DEG] [--contact-prior pad|surface]
 """
 
 from __future__ import annotations
 
 import argparse
-from dataclasses import replace
 
 import numpy as np
 
@@ -41,6 +41,7 @@ def main() -> None:
     ap.add_argument("--anneal-stages", type=int, default=1)
     ap.add_argument("--jitter-h", type=float, default=None)
     ap.add_argument("--contact-spread-deg", type=float, default=None)
+    ap.add_argument("--contact-prior", choices=("pad", "surface"), default=None)
     args = ap.parse_args()
     ts = TrialSettings(backend="sim", object=args.object, seed=args.seed,
                        particles=args.particles, max_iterations=args.actions,
@@ -48,15 +49,13 @@ def main() -> None:
                        sigma_turn_deg=1.0, sigma_tension_n=args.sigma_tension,
                        nominal_theta_deg=GUESS.get(args.object, (-10, 15)),
                        prior_spread_deg=10, rolling=True, anneal_stages=args.anneal_stages,
-                       jitter_h=args.jitter_h)
+                       jitter_h=args.jitter_h, contact_spread_deg=args.contact_spread_deg,
+                       contact_prior=args.contact_prior)
     w = open_world(ts)
     rows: list[str] = []
     planted: dict = {}
     try:
         cfg = identify_config(ts, w.model)
-        if args.contact_spread_deg is not None:
-            cfg = replace(cfg, filter=replace(cfg.filter, contact_spread=float(
-                np.radians(args.contact_spread_deg))))
         truths: list = []
 
         def scorer():

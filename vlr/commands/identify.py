@@ -65,6 +65,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--contact-spread-deg", type=float, default=None,
                    help="prior std of each pad contact's two angles about the pad's inner "
                    "face [deg] (default 8.6, vlr.filter.FilterConfig.contact_spread)")
+    p.add_argument("--contact-prior", choices=("pad", "surface"), default=None,
+                   help="draw the pad contacts about the pad's inner face, or where each "
+                   "particle's pads would touch an object of the local surface's shape "
+                   "(default: the backend's, vlr.trial.CONTACT_PRIOR_DEFAULT)")
     p.add_argument("--rolling", action=argparse.BooleanOptionalAction, default=None,
                    help="rolling contacts in the filter's motion model, or pinned ones with "
                    "--no-rolling (default: the backend's, vlr.trial.ROLLING_DEFAULT: rolling on "
@@ -180,7 +184,8 @@ def run(args: argparse.Namespace) -> int:
         sigma_turn_deg=args.sigma_turn, sigma_tension_n=args.sigma_tension,
         tension_noise_n=args.tension_noise, config=args.config,
         nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg,
-        contact_spread_deg=args.contact_spread_deg, rolling=args.rolling,
+        contact_spread_deg=args.contact_spread_deg, contact_prior=args.contact_prior,
+        rolling=args.rolling,
         slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, exploration=args.exploration,
         active_model_error=args.active_model_error,
