@@ -190,7 +190,13 @@ def test_contact_stiffness_anneal_stages_link_scaling_and_priors_reach_the_filte
     wide = identify_config(TrialSettings(backend="synthetic", particles=50,
                                          contact_spread_deg=35.0), model).filter
     assert wide.contact_spread == pytest.approx(math.radians(35.0))
-    for bad, match in ((dict(contact_spread_deg=0.0), "contact_spread_deg 0.0"),
+    assert default.contact_prior == "pad"                      # the synthetic world's
+    assert TrialSettings(backend="sim").contact_prior_in_effect == "surface"
+    assert TrialSettings(backend="hardware").contact_prior_in_effect == "surface"
+    assert identify_config(TrialSettings(backend="sim", particles=50, contact_prior="pad"),
+                           model).filter.contact_prior == "pad"
+    for bad, match in ((dict(contact_prior="face"), "contact_prior 'face'"),
+                       (dict(contact_spread_deg=0.0), "contact_spread_deg 0.0"),
                        (dict(contact_spread_deg=120.0), "contact_spread_deg 120.0"),
                        (dict(contact_spread_deg="wide"), "contact_spread_deg 'wide'"),
 (dict(link_scaling="yes"), "link_scaling 'yes'"),
