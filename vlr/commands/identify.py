@@ -282,4 +282,10 @@ def format_table(result, summary: dict, model) -> str:
             noise = settings.get("tension_noise_n") or 0.0
             lines.append(f"tensions weighed at {settings['sigma_tension_n']:g} N"
                          + (f" (the sim's readings {noise:g} N noisy)" if noise else ""))
+    guess = summary.get("grasp_guess", {})
+    if guess.get("contact_prior"):
+        where = {"surface": "where the pads would touch the object's surface",
+                 "pad": "about the pads' inner faces"}.get(guess["contact_prior"], "")
+        lines.append(f"contact prior: {guess['contact_prior']} ({where}), "
+                     f"{guess.get('contact_spread_deg', float('nan')):.1f} deg spread")
     return "\n".join(lines)
