@@ -131,3 +131,21 @@ def test_identify_says_the_likelihood_and_the_contact_prior_in_effect():
     assert format_table(result, summary, None).endswith(
         "contact prior: surface (where the pads would touch the object's surface), 8.6 deg "
         "spread")
+
+
+def test_every_identify_option_is_documented():
+    """docs/IDENTIFY.md is the README's reference for `vlr identify`: an option added to the
+    parser and left out of it fails here."""
+    import argparse
+    import pathlib
+    import re
+
+    from vlr.cli import build_parser
+
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    options = {s for a in sub.choices["identify"]._actions for s in a.option_strings
+               if s.startswith("--") and s != "--help"}
+    doc = (pathlib.Path(__file__).parents[1] / "docs" / "IDENTIFY.md").read_text()
+    missing = sorted(o for o in options if not re.search(re.escape(o) + r"(?![\w-])", doc))
+    assert not missing, f"docs/IDENTIFY.md does not mention {missing}"
