@@ -10,8 +10,25 @@ def test_bench_writes_median_seconds_per_particle_count(tmp_path):
     assert main(["bench", "--particles", "200", "400", "--repeats", "1", "--json",
                  str(out)]) == 0
     data = json.loads(out.read_text())
-    assert set(data) == {"200", "400"}
-    assert all(0 < v < 60 for v in data.values())
+    assert data["contacts"] == "rolling"  # what `vlr identify` runs on the sim and hardware
+    seconds = data["seconds_per_iteration"]
+    assert set(seconds) == {"200", "400"}
+    assert all(0 < v < 60 for v in seconds.values())
+    assert data["medians"]["200"]["total"] == seconds["200"]
+
+
+def test_bench_times_the_pinned_model_on_request(tmp_path):
+    runs = {}
+    for contacts in ("pinned", "rolling"):
+        out = tmp_path / f"{contacts}.json"
+        assert main(["bench", "--particles", "200", "--repeats", "1", "--contacts", contacts,
+                     "--json", str(out)]) == 0
+        runs[contacts] = json.loads(out.read_text())
+    assert runs["pinned"]["contacts"] == "pinned"
+    # The rolling model solves each action in substeps (`MotionConfig.rolling_substeps`):
+    # more Newton iterations than the pinned model's one solve (39 against 10 measured).
+    assert (runs["rolling"]["medians"]["200"]["newton_action"]
+            > 2 * runs["pinned"]["medians"]["200"]["newton_action"])
 
 
 def test_bench_rejects_bad_counts(tmp_path, capsys):

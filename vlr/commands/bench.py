@@ -2,8 +2,11 @@
 
 Each phase is timed separately: motion (Eq. 9 solve), observation (Eq. 5 likelihood),
 weights (tempering), resampling, jitter; "total" is their sum, "summary" (per-iteration
-quantiles for history) is reported apart. The world is the synthetic one (vlr.synthetic),
-so the numbers are those of a real identification run's iterations.
+quantiles for history) is reported apart. The world is the synthetic one (vlr.synthetic)
+holding the apple, and the filter is built as `vlr identify` builds it (`vlr.trial`), so the
+numbers are those of a real identification run's iterations. `--contacts rolling` (the
+default: what `vlr identify` runs on the sim and the real hand) times the rolling motion
+model, `pinned` the pinned one (the synthetic world's default).
 """
 
 from __future__ import annotations
@@ -15,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 PHASES = ("motion", "observation", "weights", "resampling", "jitter")
+CONTACTS = ("rolling", "pinned")
 
 
 def register(subparsers: argparse._SubParsersAction) -> None:
@@ -24,26 +28,35 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help="particle counts (default: 6000 60000 600000)")
     p.add_argument("--repeats", type=int, default=5, help="iterations timed per count")
     p.add_argument("--json", type=Path, default=None,
-                   help="write {particles: median seconds per iteration} to this file")
+                   help="write the contacts timed, {particles: median seconds per iteration} "
+                        "and each count's per-phase medians to this file")
     p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--contacts", choices=CONTACTS, default="rolling",
+                   help="the motion model timed: rolling contacts (default; the sim's and the "
+                        "real hand's) or pinned ones")
     p.set_defaults(func=run)
 
 
-def bench_one(n_particles: int, repeats: int, seed: int = 0) -> dict[str, float]:
+def bench_one(n_particles: int, repeats: int, seed: int = 0,
+              contacts: str = "rolling") -> dict[str, float]:
     """Median seconds per phase of `repeats` filter iterations with n_particles."""
-    from vlr.filter import FilterConfig, ParticleFilter
+    from vlr.filter import ParticleFilter
     from vlr.kinematics import HandModel
     from vlr.motion import ObjectParams
-    from vlr.spec import load_hand
+    from vlr.spec import load_hand, load_object
     from vlr.synthetic import SyntheticConfig, SyntheticWorld, random_action
+    from vlr.trial import TrialSettings, identify_config
 
-    model = HandModel.from_spec(load_hand("modelo"))
-    obj = ObjectParams(mass=0.12, com=(0.0, 0.0, 0.03))
+    settings = TrialSettings(backend="synthetic", object="apple", particles=n_particles,
+                             seed=seed, rolling=contacts == "rolling")
+    model = HandModel.from_spec(load_hand(settings.hand))
+    obj = ObjectParams.from_spec(load_object(settings.object))
     # The bench times the filter, not the grasp: a snap-through of the world (a grasp at a
     # fold, `SyntheticConfig.snap_theta`) must not end it.
-    world = SyntheticWorld(model, obj, SyntheticConfig(seed=seed, snap_theta=np.pi))
+    world = SyntheticWorld(model, obj, SyntheticConfig(seed=seed, snap_theta=np.pi,
+                                                       motion=settings.motion_config()))
     u = world.grasp()
-    pf = ParticleFilter(model, obj, FilterConfig(n_particles=n_particles, seed=seed))
+    pf = ParticleFilter(model, obj, identify_config(settings, model).filter)
     pf.initialize(world.observe(), u, world.nominal.theta, world.nominal.contact)
     rng = np.random.default_rng(seed + 1)
     rows = []
@@ -77,14 +90,18 @@ def run(args: argparse.Namespace) -> int:
     header = (f"{'particles':>10} " + " ".join(f"{k:>11}" for k in (*PHASES, "total",
                                                                       "summary"))
               + "   Newton iterations (action, settle)")
+    print(f"{args.contacts} contacts, the synthetic world holding the apple")
     print(header)
     for n in args.particles:
-        med = bench_one(n, args.repeats, args.seed)
+        med = bench_one(n, args.repeats, args.seed, args.contacts)
         results[n] = med
         print(f"{n:>10} " + " ".join(f"{med[k]:>10.4f}s" for k in (*PHASES, "total",
                                                                     "summary"))
               + f"   {med.get('newton_action', float('nan')):.0f}, "
               f"{med.get('newton_settle', float('nan')):.0f}", flush=True)
     if args.json is not None:
-        write_json_atomic(args.json, {str(n): r["total"] for n, r in results.items()})
+        write_json_atomic(args.json, {
+            "contacts": args.contacts,
+            "seconds_per_iteration": {str(n): r["total"] for n, r in results.items()},
+            "medians": {str(n): r for n, r in results.items()}})
     return 0
