@@ -24,6 +24,7 @@ def test_identify_synthetic_writes_result_history_and_plot(tmp_path):
     # The plotted truth agrees with the scored error of the final iteration.
     final_err = np.degrees(np.abs(hist["mean"][-1, :6] - hist["truth_theta"][-1]))
     np.testing.assert_allclose(final_err, hist["theta_error_deg"][-1], atol=1e-9)
+    np.testing.assert_allclose(result["errors"]["joint_deg_mean"], final_err.mean(), atol=1e-9)
     assert (out / "convergence.png").stat().st_size > 1000
     # The tolerant coverage counts a truth at most 0.1 degree outside its interval.
     low, high = hist["low"][-1, :6], hist["high"][-1, :6]

@@ -158,6 +158,18 @@ def test_the_row_reads_the_interval_at_15_actions_and_at_the_end():
     assert (_row(rec)["ci_deg_at_15"], _row(rec)["ci_deg"]) == (None, 1.5)
 
 
+def test_the_row_gives_the_papers_joints_figure():
+    from vlr.sweep import _row, summarize_rows
+
+    rec = {"case": "c", "status": "ok", "settings": {},
+           "result": {"errors": {"proximal_deg_mean": 1.0, "distal_deg_mean": 3.0}}}
+    assert _row(rec)["joints_deg"] == 2.0       # an older record: two-joint fingers
+    rec["result"]["errors"]["joint_deg_mean"] = 2.5
+    row = _row(rec)
+    assert row["joints_deg"] == 2.5             # the trial's own mean over every joint
+    assert summarize_rows([row])[0]["joints [deg]"] == "2.50"
+
+
 def test_the_row_compares_the_proximal_links_alone_with_the_paper():
     from vlr.sweep import _row, summarize_rows
 

@@ -54,6 +54,8 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
         err = s.theta_error_deg.reshape(n, k)
         errors = {"proximal_deg_mean": float(err[:, 0].mean()),
                   "distal_deg_mean": float(err[:, 1:].mean()),
+                  # The paper's "joints" figure of the novel-finger rows: every joint together.
+                  "joint_deg_mean": float(err.mean()),
                   "proximal_deg": dict(zip(model.names, err[:, 0].tolist(), strict=True))}
         if final_truth is not None:
             from vlr.kinematics import contact_in_distal

@@ -292,12 +292,19 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
     elif by_it and _get(rec, ("result", "converged")):
         at = by_it[-1]
     row["proximal_deg_at_15"] = at
+    # The paper's "joints" figure (its NH rows): every joint's error together. Records from
+    # before it was written hold the proximal and distal means of two-joint fingers.
+    errors = _get(rec, ("result", "errors")) or {}
+    joints = errors.get("joint_deg_mean")
+    if joints is None and None not in (errors.get("proximal_deg_mean"),
+                                       errors.get("distal_deg_mean")):
+        joints = (errors["proximal_deg_mean"] + errors["distal_deg_mean"]) / 2
+    row["joints_deg"] = joints
     # The convergence measure itself (METHOD.md 3), at the end and after the paper's budget,
     # for comparison with its floor (`vlr crb`).
     ci = _get(rec, ("result", "ci_deg_by_iteration")) or []
     row["ci_deg"] = ci[-1] if ci else None
     row["ci_deg_at_15"] = ci[PAPER_ITERATIONS] if len(ci) > PAPER_ITERATIONS else None
-    errors = _get(rec, ("result", "errors")) or {}
     for finger, v in (errors.get("link_length_mm") or {}).items():
         row[f"length_mm.{finger}"] = v
     # The paper's novel-finger unknown is the proximal link alone (METHOD.md 3, 6); the pad's
@@ -336,6 +343,7 @@ def _fmt(values: list[float], digits: int) -> str:
 SUMMARY_COLUMNS = [("proximal [deg]", "proximal_deg", 2),
                    ("proximal at 15 [deg]", "proximal_deg_at_15", 2),
                    ("distal [deg]", "distal_deg", 2),
+                   ("joints [deg]", "joints_deg", 2),
                    ("95% interval at 15 [deg]", "ci_deg_at_15", 2),
                    ("contact [mm]", "contact_mm", 2), ("iterations", "iterations", 1),
                    ("coverage", "coverage", 2), ("coverage (0.1 deg)", "coverage_tolerant", 2),
