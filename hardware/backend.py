@@ -285,10 +285,18 @@ class HardwareHand:
         t = self.config.tension
         if t is None:
             return None
-        if self._currents is None:  # no move yet (a grasp already at its commands)
+        # (Read now if no move yet: a grasp already at its commands.)
+        return np.maximum(0.0, t.newton_per_ma * (self.pulling_currents - np.asarray(t.zero_ma)))
+
+    @property
+    def pulling_currents(self) -> np.ndarray:
+        """The finger motors' present currents after the last move settled [mA], signed by
+        each one's pulling direction, in hand slot order (read now if nothing moved yet):
+        what a `tension` calibration maps to tensions (`vlr tension-calibrate`)."""
+        if self._currents is None:
             self._currents = self._pulling_currents(
                 read_motion(self.bus, self.finger_ids, CURRENT_UNIT_MA))
-        return np.maximum(0.0, t.newton_per_ma * (self._currents - np.asarray(t.zero_ma)))
+        return self._currents.copy()
 
     @property
     def reads_tensions(self) -> bool:
