@@ -91,13 +91,21 @@ def fit_tension(samples: Sequence[TensionSample]) -> TensionFit:
                       rms_n=float(np.sqrt(np.mean(residuals**2))))
 
 
+#: The first pull is approached from this much lower [m], so that every reading comes
+#: after a pull: a servo's gear friction makes its current depend on the way it last moved.
+APPROACH = 1e-4
+
+
 def collect_samples(hand, pulls: Sequence[float],
                     read_tensions: Callable[[np.ndarray], np.ndarray]) -> list[TensionSample]:
-    """Grasp, then for each pull p [m] move every tendon to grasp + p (in steps the hand
-    allows), let it settle, read the present currents and ask `read_tensions(commands)` for
-    the load cells' tensions [N]; back to the grasp command at the end."""
+    """Grasp, then for each pull p [m], in rising order, move every tendon to grasp + p (in
+    steps the hand allows; the first from `APPROACH` below), let it settle, read the present
+    currents and ask `read_tensions(commands)` for the load cells' tensions [N]; back to the
+    grasp command at the end."""
     hand.grasp()
     base = hand.commands
+    pulls = sorted(pulls)
+    _move_to(hand, base + pulls[0] - APPROACH)
     samples = []
     for p in pulls:
         _move_to(hand, base + p)
@@ -171,7 +179,8 @@ def run(args: argparse.Namespace) -> int:
         limit = hand.config.motion.range
         base = np.asarray(hand.config.grasp.commands)
         for p in args.pulls_mm:
-            u = base + p * 1e-3
+            # (The lowest is approached from APPROACH below: that must be in range too.)
+            u = base + p * 1e-3 - (APPROACH if p == min(args.pulls_mm) else 0.0)
             if np.any(u < limit[0]) or np.any(u > limit[1]):
                 raise UserError(f"--pulls-mm {p}: commands {np.round(u * 1e3, 2).tolist()} mm "
                                 f"leave motion.range {[v * 1e3 for v in limit]} mm")

@@ -86,13 +86,14 @@ def test_calibration_on_the_simulated_hand_recovers_its_torque_constant(tmp_path
                             log=lambda m: None)
         with hand:
             samples = collect_samples(
-                hand, [-2e-4, 0.0, 2e-4, 4e-4],
+                hand, [-2e-4, 0.0, 2e-4, 4e-4, 6e-4],   # the CLI's default pulls
                 lambda u: plant._call(lambda sim: sim.static_tensions()))
     finally:
         emulator.stop()
         plant.close()
     fit = fit_tension(samples)
-    assert fit.config.newton_per_ma == pytest.approx(TORQUE_CONSTANT / 0.01 / 1000, rel=0.03)
+    # Measured 0.1815 against 0.1783 N/mA, zeros 1.2-2.8 mA, RMS 0.11 N.
+    assert fit.config.newton_per_ma == pytest.approx(TORQUE_CONSTANT / 0.01 / 1000, rel=0.04)
     assert np.all(np.abs(fit.config.zero_ma) < 5.0)      # mA: the sim's motors have no offset
     assert fit.rms_n < 0.5                               # 2.69 mA is 0.48 N
 
