@@ -21,7 +21,7 @@ from hardware.config import HardwareConfig, load_config
 from hardware.emulate import build_emulator
 from hardware.emulator import Emulator
 from vlr.camera import CameraCalibration
-from vlr.spec import ObjectSpec, load_hand
+from vlr.spec import ObjectSpec, load_hand, load_object
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE_CAMERA = ROOT / "hardware" / "example_camera.yaml"
@@ -84,3 +84,35 @@ def hand_on_emulator(cfg: HardwareConfig) -> Iterator[tuple[HardwareHand, Emulat
             hand.close()
     finally:
         emulator.stop()
+
+
+def sim_config_dict(**extra: Any) -> dict[str, Any]:
+    """A config whose emulated motors drive the MuJoCo hand holding the apple (`SimPlant`),
+    with the sim's rendered frames as the camera."""
+    data = config_dict(
+        object="apple",
+        grasp={"commands": [0.003, 0.0027, 0.0027], "check_tag": True},
+        camera={"fake": "sim"},
+        emulator={"plant": "sim", "slack": 0.002},
+        **extra)
+    data.pop("spread")
+    data["motion"]["settle_timeout"] = 3.0
+    return data
+
+
+@contextlib.contextmanager
+def hand_on_sim_plant(cfg: HardwareConfig) -> Iterator[tuple[HardwareHand, Emulator, Any]]:
+    """A hand on emulated motors that drive the simulated hand: (hand, emulator, plant). The
+    hand is open inside the block; the emulator is stopped and the plant closed after it."""
+    emulator, plant = build_emulator(cfg)
+    emulator.start()
+    try:
+        hand = HardwareHand(cfg, spec=load_hand(cfg.hand), object_spec=load_object("apple"),
+                            calibration=plant.calibration,
+                            camera=FakeCamera(source=plant.render), port=emulator.port,
+                            log=lambda m: None)
+        with hand:
+            yield hand, emulator, plant
+    finally:
+        emulator.stop()
+        plant.close()

@@ -64,33 +64,15 @@ def test_calibration_on_the_simulated_hand_recovers_its_torque_constant(tmp_path
     sim_plant.py); the sim's own tensions as the load cell give back that constant, and the
     RMS of the fit is what the current's 2.69 mA unit costs."""
     pytest.importorskip("sim.backend")
-    from hardware.backend import HardwareHand
-    from hardware.camera import FakeCamera
-    from hardware.emulate import build_emulator
     from hardware.sim_plant import TORQUE_CONSTANT
     from hardware.tension_calibration import collect_samples
-    from vlr.spec import load_hand, load_object
+    from tests.hardware_fixtures import hand_on_sim_plant, sim_config_dict
 
-    data = config_dict(object="apple", camera={"fake": "sim"},
-                       grasp={"commands": [0.003, 0.0027, 0.0027], "check_tag": True},
-                       emulator={"plant": "sim", "slack": 0.002})
-    data.pop("spread")
-    data["motion"]["settle_timeout"] = 3.0
-    cfg = load_config(write_config(tmp_path, data))
-    emulator, plant = build_emulator(cfg)
-    emulator.start()
-    try:
-        hand = HardwareHand(cfg, spec=load_hand(cfg.hand), object_spec=load_object("apple"),
-                            calibration=plant.calibration,
-                            camera=FakeCamera(source=plant.render), port=emulator.port,
-                            log=lambda m: None)
-        with hand:
-            samples = collect_samples(
-                hand, [-2e-4, 0.0, 2e-4, 4e-4, 6e-4],   # the CLI's default pulls
-                lambda u: plant._call(lambda sim: sim.static_tensions()))
-    finally:
-        emulator.stop()
-        plant.close()
+    cfg = load_config(write_config(tmp_path, sim_config_dict()))
+    with hand_on_sim_plant(cfg) as (hand, _, plant):
+        samples = collect_samples(
+            hand, [-2e-4, 0.0, 2e-4, 4e-4, 6e-4],   # the CLI's default pulls
+            lambda u: plant._call(lambda sim: sim.static_tensions()))
     fit = fit_tension(samples)
     # Measured 0.1815 against 0.1783 N/mA, zeros 1.2-2.8 mA, RMS 0.11 N.
     assert fit.config.newton_per_ma == pytest.approx(TORQUE_CONSTANT / 0.01 / 1000, rel=0.04)
