@@ -170,20 +170,23 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     from hardware.backend import open_hand
+    from hardware.config import load_config
     from vlr.errors import UserError
     from vlr.io import write_text_atomic
 
     if len(set(args.pulls_mm)) < 2:
         raise UserError(f"--pulls-mm {args.pulls_mm}: give at least two different pulls")
+    # Checked before the hand opens: opening it already winds the motors (the taut probe).
+    cfg = load_config(args.config)
+    limit = cfg.motion.range
+    base = np.asarray(cfg.grasp.commands)
+    for p in args.pulls_mm:
+        # (The lowest is approached from APPROACH below: that must be in range too.)
+        u = base + p * 1e-3 - (APPROACH if p == min(args.pulls_mm) else 0.0)
+        if np.any(u < limit[0]) or np.any(u > limit[1]):
+            raise UserError(f"--pulls-mm {p}: commands {np.round(u * 1e3, 2).tolist()} mm "
+                            f"leave motion.range {[v * 1e3 for v in limit]} mm")
     with open_hand(config=args.config) as hand:
-        limit = hand.config.motion.range
-        base = np.asarray(hand.config.grasp.commands)
-        for p in args.pulls_mm:
-            # (The lowest is approached from APPROACH below: that must be in range too.)
-            u = base + p * 1e-3 - (APPROACH if p == min(args.pulls_mm) else 0.0)
-            if np.any(u < limit[0]) or np.any(u > limit[1]):
-                raise UserError(f"--pulls-mm {p}: commands {np.round(u * 1e3, 2).tolist()} mm "
-                                f"leave motion.range {[v * 1e3 for v in limit]} mm")
         names = list(hand.spec.finger_names)
         samples = collect_samples(hand, [p * 1e-3 for p in args.pulls_mm],
                                   prompt_tensions(names))

@@ -96,7 +96,9 @@ def test_cli_writes_a_tension_section_the_config_accepts(tmp_path, monkeypatch, 
 
 
 def test_cli_refuses_pulls_outside_the_motion_range_before_moving(tmp_path, capsys):
-    path = write_config(tmp_path, config_dict())
+    # No emulator behind this port: a refusal that opened the hand first would fail on it.
+    path = write_config(tmp_path, config_dict(bus={"port": "/dev/null-no-motors",
+                                                   "baud": 1_000_000}))
     out = tmp_path / "tension.yaml"
     assert main(["tension-calibrate", "--config", str(path), "--pulls-mm", "0", "40",
                  "--out", str(out)]) == 2
