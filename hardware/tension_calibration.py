@@ -20,6 +20,7 @@ import math
 import sys
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -131,8 +132,12 @@ def prompt_tensions(names: Sequence[str], ask: Callable[[str], str] | None = Non
     def read(commands: np.ndarray) -> np.ndarray:
         mm = ", ".join(f"{u * 1e3:.2f}" for u in commands)
         while True:
-            text = (ask or input)(f"commands [{mm}] mm; tensions on the "
-                                  f"{', '.join(names)} lines [N]: ")
+            try:
+                text = (ask or input)(f"commands [{mm}] mm; tensions on the "
+                                      f"{', '.join(names)} lines [N]: ")
+            except EOFError:
+                raise CalibrationInputError("no load-cell reading given (input ended): "
+                                            "the calibration needs one per pull") from None
             try:
                 values = [float(v) for v in text.replace(",", " ").split()]
             except ValueError:
@@ -176,6 +181,8 @@ def run(args: argparse.Namespace) -> int:
 
     if len(set(args.pulls_mm)) < 2:
         raise UserError(f"--pulls-mm {args.pulls_mm}: give at least two different pulls")
+    if args.out and Path(args.out).is_dir():
+        raise UserError(f"--out {args.out} is a folder: give the YAML file to write")
     # Checked before the hand opens: opening it already winds the motors (the taut probe).
     cfg = load_config(args.config)
     limit = cfg.motion.range
@@ -186,11 +193,11 @@ def run(args: argparse.Namespace) -> int:
         if np.any(u < limit[0]) or np.any(u > limit[1]):
             raise UserError(f"--pulls-mm {p}: commands {np.round(u * 1e3, 2).tolist()} mm "
                             f"leave motion.range {[v * 1e3 for v in limit]} mm")
-    with open_hand(config=args.config) as hand:
-        names = list(hand.spec.finger_names)
-        samples = collect_samples(hand, [p * 1e-3 for p in args.pulls_mm],
-                                  prompt_tensions(names))
     try:
+        with open_hand(config=args.config) as hand:
+            names = list(hand.spec.finger_names)
+            samples = collect_samples(hand, [p * 1e-3 for p in args.pulls_mm],
+                                      prompt_tensions(names))
         fit = fit_tension(samples)
     except CalibrationInputError as exc:
         raise UserError(str(exc)) from None

@@ -58,6 +58,12 @@ def test_prompt_asks_again_until_it_has_one_number_per_finger():
     read = prompt_tensions(["thumb", "left", "right"], ask=lambda prompt: next(answers))
     np.testing.assert_allclose(read(np.array([0.003, 0.002, 0.002])), [12.5, 9.0, 10.25])
 
+    def ended(prompt):
+        raise EOFError
+
+    with pytest.raises(CalibrationInputError, match="input ended"):
+        prompt_tensions(["thumb"], ask=ended)(np.array([0.003]))
+
 
 def test_calibration_on_the_simulated_hand_recovers_its_torque_constant(tmp_path):
     """The sim plant's motors draw tension x spool radius / torque constant (hardware/
@@ -106,4 +112,20 @@ def test_cli_refuses_pulls_outside_the_motion_range_before_moving(tmp_path, caps
     err = capsys.readouterr().err
     assert "--pulls-mm 40" in err and "motion.range" in err and "Traceback" not in err
     assert "two different pulls" in err
+    assert not out.exists()
+    assert main(["tension-calibrate", "--config", str(path), "--out", str(tmp_path)]) == 2
+    assert "is a folder" in capsys.readouterr().err
+
+
+def test_cli_input_that_ends_is_one_line_and_no_file(tmp_path, monkeypatch, capsys):
+    path = write_config(tmp_path, config_dict())
+
+    def ended(prompt):
+        raise EOFError
+
+    monkeypatch.setattr("builtins.input", ended)
+    out = tmp_path / "tension.yaml"
+    assert main(["tension-calibrate", "--config", str(path), "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "input ended" in err and "Traceback" not in err
     assert not out.exists()
