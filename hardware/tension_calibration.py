@@ -55,9 +55,11 @@ class CalibrationInputError(ValueError):
     """Readings that cannot give a map (too few, no spread, a slope that is not positive)."""
 
 
-def fit_tension(samples: Sequence[TensionSample]) -> TensionFit:
+def fit_tension(samples: Sequence[TensionSample],
+                names: Sequence[str] | None = None) -> TensionFit:
     """Least squares of T_ij = a I_ij - b_j over samples i and fingers j: one slope a
-    (`newton_per_ma`), one offset per finger (`zero_ma` = b_j / a)."""
+    (`newton_per_ma`), one offset per finger (`zero_ma` = b_j / a). `names` (the hand's
+    fingers, in the readings' order) name a finger in an error; by default its index."""
     if len(samples) < 2:
         raise CalibrationInputError(f"{len(samples)} reading(s): the fit needs at least 2 per "
                                     "finger, at different tensions")
@@ -72,7 +74,8 @@ def fit_tension(samples: Sequence[TensionSample]) -> TensionFit:
     spread = np.ptp(tension, axis=0)
     if np.any(spread <= 0.0):
         bad = int(np.argmin(spread))
-        raise CalibrationInputError(f"finger {bad}'s tension is {tension[0, bad]:g} N in every "
+        who = names[bad] if names is not None and len(names) == n_fingers else bad
+        raise CalibrationInputError(f"finger {who}'s tension is {tension[0, bad]:g} N in every "
                                     "reading: pull through commands that change it")
     design = np.zeros((n_samples * n_fingers, 1 + n_fingers))
     design[:, 0] = current.ravel()
@@ -198,7 +201,7 @@ def run(args: argparse.Namespace) -> int:
             names = list(hand.spec.finger_names)
             samples = collect_samples(hand, [p * 1e-3 for p in args.pulls_mm],
                                       prompt_tensions(names))
-        fit = fit_tension(samples)
+        fit = fit_tension(samples, names)
     except CalibrationInputError as exc:
         raise UserError(str(exc)) from None
     print(f"{'commands [mm]':>24} " + " ".join(f"{n + ' [mA / N / fit]':>28}" for n in names))

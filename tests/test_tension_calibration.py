@@ -48,6 +48,8 @@ def test_fit_refuses_readings_that_cannot_give_a_map():
     flat = _samples(0.18, [0, 0, 0], [[50, 50, 50], [60, 50, 70]])  # left never changes
     with pytest.raises(CalibrationInputError, match="finger 1"):
         fit_tension(flat)
+    with pytest.raises(CalibrationInputError, match="finger left's"):
+        fit_tension(flat, ["thumb", "left", "right"])
     backwards = _samples(-0.18, [0, 0, 0], [[50, 40, 30], [70, 60, 50]])
     with pytest.raises(CalibrationInputError, match="not positive"):
         fit_tension(backwards)
