@@ -7,6 +7,7 @@ from filterpy.monte_carlo import resampling as fp_resampling
 from vlr.filter import (
     FilterConfig,
     ParticleFilter,
+    Summary,
     effective_sample_size,
     interval_width_deg,
     parse_unknown,
@@ -61,6 +62,22 @@ def test_tempering_keeps_ess():
 def test_interval_width():
     x = np.random.default_rng(0).normal(0, np.radians(1), (20000, 6))
     assert interval_width_deg(x) == pytest.approx(2 * 1.96, rel=0.05)
+
+
+def test_summary_median_of_a_set_piled_on_a_stop():
+    # A joint on its stop: half the particles at the stop, the rest spread past it. The
+    # median stays on the stop; the mean is pulled off it.
+    rng = np.random.default_rng(0)
+    x = np.concatenate([np.zeros(5000), rng.uniform(0.0, 0.3, 4000)])[:, None]
+    s = Summary.of(x)
+    assert s.median[0] == 0.0 and s.mean[0] > 0.05
+    # Weights give the same answers as the set they stand for.
+    w = np.r_[np.full(5000, 2.0), np.ones(4000)]
+    sw = Summary.of(x, w)
+    assert sw.median[0] == 0.0
+    np.testing.assert_allclose(sw.mean, (w @ x) / w.sum())
+    heavy = Summary.of(x, np.r_[np.full(5000, 0.1), np.ones(4000)])
+    assert 0.0 < heavy.median[0] < heavy.high[0]
 
 
 def test_parse_unknown(modelo):

@@ -40,6 +40,14 @@ def test_identify_synthetic_writes_result_history_and_plot(tmp_path):
     est = result["estimates"]
     np.testing.assert_allclose([e["low"] for e in est.values()], low, atol=1e-12)
     np.testing.assert_allclose([e["high"] for e in est.values()], high, atol=1e-12)
+    # The posterior median is scored beside the mean, from the same set.
+    np.testing.assert_allclose([e["median"] for e in est.values()], hist["median"][-1, :6],
+                               atol=1e-12)
+    med_err = np.degrees(np.abs(hist["median"][-1, :6] - hist["truth_theta"][-1]))
+    np.testing.assert_allclose(result["errors_median"]["joint_deg_mean"], med_err.mean(),
+                               atol=1e-9)
+    np.testing.assert_allclose(result["proximal_median_deg_by_iteration"][-1],
+                               result["errors_median"]["proximal_deg_mean"], atol=1e-4)
 
 
 def test_identify_records_each_unknowns_error_per_iteration(tmp_path):

@@ -185,6 +185,27 @@ def test_the_row_compares_the_proximal_links_alone_with_the_paper():
     assert "proximal_link_mm" not in _row(rec)
 
 
+def test_the_row_gives_the_posterior_medians_figures_beside_the_means():
+    from vlr.sweep import PAPER_ITERATIONS, _row, summarize_rows
+
+    median = {"proximal_deg_mean": 0.5, "joint_deg_mean": 1.5,
+              "link_length_mm_by_joint": {"left.proximal": 2.0, "left.distal": 9.0},
+              "stiffness": {"thumb.distal": 0.002}}
+    rec = {"case": "c", "status": "ok", "settings": {},
+           "result": {"errors": {"joint_deg_mean": 2.5}, "errors_median": median,
+                      "proximal_median_deg_by_iteration": list(range(20))}}
+    row = _row(rec)
+    assert (row["joints_deg"], row["joints_deg_median"]) == (2.5, 1.5)
+    assert row["proximal_link_mm_median"] == 2.0
+    assert row["proximal_deg_median_at_15"] == PAPER_ITERATIONS
+    s = summarize_rows([row])[0]
+    assert s["joints, median [deg]"] == "1.50"
+    assert s["stiffness_median.thumb.distal error [N m/rad]"] == "0.0020"
+    # A record from before the median was scored has no median columns.
+    del rec["result"]["errors_median"]
+    assert "joints_deg_median" not in _row(rec)
+
+
 def test_a_grid_setting_splits_the_summary_instead_of_being_averaged(tmp_path):
     from vlr.sweep import varying_settings, write_tables
 

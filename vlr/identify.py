@@ -24,7 +24,7 @@ import numpy as np
 from vlr.active import ActiveExploration, choose_action
 from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
-from vlr.filter import FilterConfig, IterationRecord, ParticleFilter
+from vlr.filter import FilterConfig, IterationRecord, ParticleFilter, Summary
 from vlr.hand import GraspError, report_commands
 from vlr.kinematics import HandModel, contact_in_distal, normals_from_angles
 from vlr.motion import ObjectParams
@@ -81,11 +81,12 @@ class IdentifyConfig:
 
 @dataclass(frozen=True)
 class Estimate:
-    """Posterior mean and 95% interval of one quantity."""
+    """Posterior mean, 95% interval and median of one quantity."""
 
     mean: float
     low: float
     high: float
+    median: float | None = None
 
 
 @dataclass(frozen=True)
@@ -98,6 +99,9 @@ class Score:
     unknown_covered: dict[str, bool]
     theta_miss_deg: np.ndarray | None = None
     theta_true: np.ndarray | None = None
+    # The same errors of the posterior median (the estimate of least absolute error).
+    theta_error_median_deg: np.ndarray | None = None
+    unknown_error_median: dict[str, float] | None = None
 
 
 @dataclass
@@ -139,10 +143,11 @@ def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
     n_th = pf.model.n_fingers * pf.model.n_joints
     t = truth.theta.ravel()
     err = np.degrees(np.abs(post.mean[:n_th] - t))
+    err_med = np.degrees(np.abs(post.median[:n_th] - t))
     cov = (post.low[:n_th] <= t) & (t <= post.high[:n_th])
     miss = np.degrees(np.maximum(np.maximum(post.low[:n_th] - t, t - post.high[:n_th]), 0.0))
     base = len(post.mean) - len(pf.unknowns)
-    ue, uc = {}, {}
+    ue, uc, ue_med = {}, {}, {}
     for j, u in enumerate(pf.unknowns):
         if u.kind == "stiffness":
             true = truth.stiffness[u.finger, u.joint]
@@ -151,8 +156,9 @@ def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
         else:
             true = truth.tendon[max(u.finger, 0)]
         ue[u.spec] = float(post.mean[base + j] - true)
+        ue_med[u.spec] = float(post.median[base + j] - true)
         uc[u.spec] = bool(post.low[base + j] <= true <= post.high[base + j])
-    return Score(err, cov, ue, uc, miss, t.copy())
+    return Score(err, cov, ue, uc, miss, t.copy(), err_med, ue_med)
 
 
 def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
@@ -269,13 +275,12 @@ def _result(pf: ParticleFilter, iterations: int, converged_at: int | None,
     last = pf.history[-1] if pf.history else None
     if last is not None:
         post = last.posterior or last.prior
-        mean, q = post.mean, np.stack([post.low, post.high])
     else:
-        x = pf.pack(pf.state)
-        q = np.quantile(x, [0.025, 0.975], axis=0)
-        mean = x.mean(axis=0)
+        post = Summary.of(pf.pack(pf.state))
+    mean = post.mean
     names = pf.dim_names
-    est = {n: Estimate(float(mean[j]), float(q[0, j]), float(q[1, j]))
+    est = {n: Estimate(float(mean[j]), float(post.low[j]), float(post.high[j]),
+                       float(post.median[j]))
            for j, n in enumerate(names)}
     n_th = m.n_fingers * m.n_joints
     theta = {f"{f}.{k}": est[f"theta:{f}.{k}"] for f in m.names for k in range(m.n_joints)}
@@ -284,8 +289,9 @@ def _result(pf: ParticleFilter, iterations: int, converged_at: int | None,
                                  pf.state.segments.mean(axis=0))
     c_all = contact_in_distal(m, pf.state.normals, pf.state.segments)
     lengths = np.linalg.norm(c_all[..., 1:], axis=-1)
-    ql = np.quantile(lengths, [0.025, 0.975], axis=0)
-    dvl = {f: Estimate(float(lengths[:, i].mean()), float(ql[0, i]), float(ql[1, i]))
+    ql = np.quantile(lengths, [0.025, 0.5, 0.975], axis=0)
+    dvl = {f: Estimate(float(lengths[:, i].mean()), float(ql[0, i]), float(ql[2, i]),
+                       float(ql[1, i]))
            for i, f in enumerate(m.names)}
     unknowns = {u.spec: est[u.spec] for u in pf.unknowns}
     return IdentifyResult(converged=pf.converged, iterations=iterations,

@@ -45,18 +45,17 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
         out["proximal_deg_by_iteration"] = [
             round(float(sc.theta_error_deg.reshape(n, k)[:, 0].mean()), 4)
             for sc in result.scores]
+        if result.scores[-1].theta_error_median_deg is not None:
+            out["proximal_median_deg_by_iteration"] = [
+                round(float(sc.theta_error_median_deg.reshape(n, k)[:, 0].mean()), 4)
+                for sc in result.scores]
         # Each unknown's error per iteration (SI units): how far the budget was from enough.
         if result.scores[-1].unknown_error:
             out["unknown_error_by_iteration"] = {
                 spec: [float(f"{abs(sc.unknown_error[spec]):.4g}") for sc in result.scores]
                 for spec in result.scores[-1].unknown_error}
         s = result.scores[-1]
-        err = s.theta_error_deg.reshape(n, k)
-        errors = {"proximal_deg_mean": float(err[:, 0].mean()),
-                  "distal_deg_mean": float(err[:, 1:].mean()),
-                  # The paper's "joints" figure of the novel-finger rows: every joint together.
-                  "joint_deg_mean": float(err.mean()),
-                  "proximal_deg": dict(zip(model.names, err[:, 0].tolist(), strict=True))}
+        errors = _errors(s.theta_error_deg.reshape(n, k), s.unknown_error, model)
         if final_truth is not None:
             from vlr.kinematics import contact_in_distal
 
@@ -65,19 +64,12 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
             err_c = np.linalg.norm(result.contacts - c_true, axis=-1) * 1e3
             if np.all(np.isfinite(err_c)):  # a finger without contact has no contact error
                 errors["contact_mm_mean"] = float(err_c.mean())
-        lengths, stiff = {}, {}
-        for spec, e in s.unknown_error.items():
-            kind, _, rest = spec.partition(":")
-            if kind == "length":  # a finger's mean over its unknown lengths
-                lengths.setdefault(rest.split(".")[0], []).append(abs(e) * 1e3)
-                errors.setdefault("link_length_mm_by_joint", {})[rest] = abs(e) * 1e3
-            elif kind == "stiffness":
-                stiff[rest] = abs(e)
-        if lengths:
-            errors["link_length_mm"] = {f: float(np.mean(v)) for f, v in lengths.items()}
-        if stiff:
-            errors["stiffness"] = stiff
         out["errors"] = errors
+        if s.theta_error_median_deg is not None:
+            # The same figures for the posterior median, the estimate that minimizes the
+            # absolute error the paper reports (vlr.filter.Summary).
+            out["errors_median"] = _errors(s.theta_error_median_deg.reshape(n, k),
+                                           s.unknown_error_median or {}, model)
         covered = list(s.theta_covered) + list(s.unknown_covered.values())
         out["coverage"] = float(np.mean(covered))
         if s.theta_miss_deg is not None:
@@ -89,6 +81,29 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
     return out
 
 
+def _errors(err: np.ndarray, unknown_error: dict[str, float], model) -> dict:
+    """The error figures of one point estimate: joint errors [deg] (fingers x joints) and
+    each unknown's signed error (SI units)."""
+    errors: dict = {"proximal_deg_mean": float(err[:, 0].mean()),
+                    "distal_deg_mean": float(err[:, 1:].mean()),
+                    # The paper's "joints" figure of the novel-finger rows: every joint.
+                    "joint_deg_mean": float(err.mean()),
+                    "proximal_deg": dict(zip(model.names, err[:, 0].tolist(), strict=True))}
+    lengths, stiff = {}, {}
+    for spec, e in unknown_error.items():
+        kind, _, rest = spec.partition(":")
+        if kind == "length":  # a finger's mean over its unknown lengths
+            lengths.setdefault(rest.split(".")[0], []).append(abs(e) * 1e3)
+            errors.setdefault("link_length_mm_by_joint", {})[rest] = abs(e) * 1e3
+        elif kind == "stiffness":
+            stiff[rest] = abs(e)
+    if lengths:
+        errors["link_length_mm"] = {f: float(np.mean(v)) for f, v in lengths.items()}
+    if stiff:
+        errors["stiffness"] = stiff
+    return errors
+
+
 def write_outputs(out: Path, result, summary: dict, model, truths: list | None = None) -> None:
     """result.json, history.npz and convergence.png, each written atomically."""
     from vlr.io import atomic_path, write_json_atomic
@@ -98,6 +113,7 @@ def write_outputs(out: Path, result, summary: dict, model, truths: list | None =
     post = [r.posterior or r.prior for r in result.history]
     hist = {"iteration": np.array([r.iteration for r in result.history]),
             "mean": np.array([p.mean for p in post]),
+            "median": np.array([p.median for p in post]),
             "low": np.array([p.low for p in post]),
             "high": np.array([p.high for p in post]),
             "ess": np.array([r.ess for r in result.history]),

@@ -316,6 +316,21 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
         row["proximal_link_mm"] = float(np.mean(proximal))
     for joint, v in (errors.get("stiffness") or {}).items():
         row[f"stiffness.{joint}"] = v
+    # The same figures of the posterior median (vlr.filter.Summary), where recorded.
+    median = _get(rec, ("result", "errors_median")) or {}
+    if median:
+        row["proximal_deg_median"] = median.get("proximal_deg_mean")
+        row["joints_deg_median"] = median.get("joint_deg_mean")
+        by_it = _get(rec, ("result", "proximal_median_deg_by_iteration")) or []
+        row["proximal_deg_median_at_15"] = (
+            by_it[PAPER_ITERATIONS] if len(by_it) > PAPER_ITERATIONS
+            else by_it[-1] if by_it and _get(rec, ("result", "converged")) else None)
+        proximal = [v for joint, v in (median.get("link_length_mm_by_joint") or {}).items()
+                    if joint.endswith(".proximal")]
+        if proximal:
+            row["proximal_link_mm_median"] = float(np.mean(proximal))
+        for joint, v in (median.get("stiffness") or {}).items():
+            row[f"stiffness_median.{joint}"] = v
     if rec.get("status") != "ok":
         row["error"] = rec.get("error")
     return row
@@ -348,7 +363,11 @@ SUMMARY_COLUMNS = [("proximal [deg]", "proximal_deg", 2),
                    ("contact [mm]", "contact_mm", 2), ("iterations", "iterations", 1),
                    ("coverage", "coverage", 2), ("coverage (0.1 deg)", "coverage_tolerant", 2),
                    ("s/iteration", "s_per_iteration", 2),
-                   ("proximal link error [mm]", "proximal_link_mm", 2)]
+                   ("proximal link error [mm]", "proximal_link_mm", 2),
+                   ("proximal, median [deg]", "proximal_deg_median", 2),
+                   ("proximal at 15, median [deg]", "proximal_deg_median_at_15", 2),
+                   ("joints, median [deg]", "joints_deg_median", 2),
+                   ("proximal link error, median [mm]", "proximal_link_mm_median", 2)]
 
 
 # What the summary is always split by; `varying_settings` adds a sweep's grid keys.
@@ -392,11 +411,11 @@ def summarize_rows(rows: list[dict[str, Any]],
         s["grasps lost"] = f"{sum(r.get('grasp_lost_at') is not None for r in ok)}/{len(ok)}"
         for title, col, digits in SUMMARY_COLUMNS:
             s[title] = _fmt([r.get(col) for r in ok], digits)
-        extra = sorted({k for r in ok for k in r if k.startswith(("length_mm.",
-                                                                     "stiffness."))})
+        extra = sorted({k for r in ok for k in r if k.startswith(
+            ("length_mm.", "stiffness.", "stiffness_median."))})
         for col in extra:
-            digits = 4 if col.startswith("stiffness.") else 2
-            unit = "N m/rad" if col.startswith("stiffness.") else "mm"
+            digits = 4 if col.startswith("stiffness") else 2
+            unit = "N m/rad" if col.startswith("stiffness") else "mm"
             s[f"{col} error [{unit}]"] = _fmt([r.get(col) for r in ok], digits)
         out.append(s)
     return out
