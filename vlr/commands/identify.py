@@ -254,15 +254,17 @@ def run(args: argparse.Namespace) -> int:
 def format_table(result, summary: dict, model) -> str:
     lines = [f"converged: {summary['converged']} after {summary['iterations']} iterations "
              f"(criterion met at {summary['converged_at']})", "",
-             f"{'joint':16s} {'estimate [deg]':>15s} {'95% interval [deg]':>22s}"]
+             f"{'joint':16s} {'mean [deg]':>11s} {'median [deg]':>13s} "
+             f"{'95% interval [deg]':>22s}"]
     if result.grasp_lost_at is not None:
         lines[1:1] = [f"stopped: the hand reported the grasp lost after action "
                       f"{result.grasp_lost_at} ({result.grasp_message or 'no reason given'})"]
     for name, e in result.theta.items():
-        lines.append(f"{name:16s} {np.degrees(e.mean):15.2f} "
+        lines.append(f"{name:16s} {np.degrees(e.mean):11.2f} {np.degrees(e.median):13.2f} "
                      f"{np.degrees(e.low):10.2f} .. {np.degrees(e.high):7.2f}")
     for name, e in result.unknowns.items():
-        lines.append(f"{name:24s} {e.mean:.5g}  [{e.low:.5g} .. {e.high:.5g}]")
+        lines.append(f"{name:24s} {e.mean:.5g} (median {e.median:.5g})  "
+                     f"[{e.low:.5g} .. {e.high:.5g}]")
     if "errors" in summary:
         err = summary["errors"]
         lines.append("")
