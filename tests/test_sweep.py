@@ -136,6 +136,16 @@ def test_records_are_strict_json(tmp_path):
     assert json.loads(text) == {"a": None, "b": [None, 1.5], "c": [None, 2.0]}
 
 
+def test_a_trial_with_a_spec_file_path_has_a_flat_file_name():
+    from vlr.sweep import Trial, TrialSettings
+
+    named = Trial("c", TrialSettings(hand="modelo", object="apple", seed=3))
+    assert named.id.startswith("c_apple_modelo_s3_")  # names keep the ids of old sweeps
+    path = Trial("c", TrialSettings(hand="/tmp/hands/my hand.yaml", object="apple"))
+    assert "/" not in path.id and " " not in path.id
+    assert "-tmp-hands-my-hand.yaml" in path.id
+
+
 def test_the_row_reads_the_error_after_the_papers_15_actions():
     from vlr.sweep import PAPER_ITERATIONS, _row
 

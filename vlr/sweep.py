@@ -64,7 +64,13 @@ class Trial:
         blob = json.dumps({"case": self.case, **changed}, sort_keys=True)
         digest = hashlib.sha1(blob.encode()).hexdigest()[:8]
         slug = "".join(ch if ch.isalnum() else "-" for ch in self.case.lower()).strip("-")
-        return f"{slug}_{s.object}_{s.hand}_s{s.seed}_{digest}"
+        return f"{slug}_{_file_safe(s.object)}_{_file_safe(s.hand)}_s{s.seed}_{digest}"
+
+
+def _file_safe(name: str) -> str:
+    """A model name as it is, a spec file's path with its separators made dashes: the id is
+    a file name, and `hand: ../my_hand.yaml` must not make folders under OUT/trials."""
+    return "".join(ch if ch.isalnum() or ch in "_.-" else "-" for ch in str(name))
 
 
 @dataclass(frozen=True)
