@@ -287,17 +287,30 @@ def _get(d: Any, path: tuple[str, ...]) -> Any:
     return d
 
 
+def _at_paper_budget(rec: dict[str, Any], key: str) -> Any:
+    """A per-iteration figure after the paper's 15 actions (the grasp's update is entry 0),
+    or at the stop of a trial that converged before."""
+    by_it = _get(rec, ("result", key)) or []
+    if len(by_it) > PAPER_ITERATIONS:
+        return by_it[PAPER_ITERATIONS]
+    if by_it and _get(rec, ("result", "converged")):
+        return by_it[-1]
+    return None
+
+
+def _proximal_links_mm(errors: dict[str, Any]) -> float | None:
+    """The mean error over the proximal links alone. The paper's novel-finger unknown is the
+    proximal link (METHOD.md 3, 6); the pad's offset along the distal link is ours (our novel
+    fingers change it too), so the paper's figure is compared with this, shown beside the
+    mean over both."""
+    by_joint = errors.get("link_length_mm_by_joint") or {}
+    proximal = [v for joint, v in by_joint.items() if joint.endswith(".proximal")]
+    return float(np.mean(proximal)) if proximal else None
+
+
 def _row(rec: dict[str, Any]) -> dict[str, Any]:
     row = {name: _get(rec, path) for name, path in COLUMNS}
-    # The paper's budget: the error after 15 actions (the grasp's update is entry 0), or at
-    # the stop of a trial that converged before.
-    by_it = _get(rec, ("result", "proximal_deg_by_iteration")) or []
-    at = None
-    if len(by_it) > PAPER_ITERATIONS:
-        at = by_it[PAPER_ITERATIONS]
-    elif by_it and _get(rec, ("result", "converged")):
-        at = by_it[-1]
-    row["proximal_deg_at_15"] = at
+    row["proximal_deg_at_15"] = _at_paper_budget(rec, "proximal_deg_by_iteration")
     # The paper's "joints" figure (its NH rows): every joint's error together. Records from
     # before it was written hold the proximal and distal means of two-joint fingers.
     errors = _get(rec, ("result", "errors")) or {}
@@ -313,13 +326,8 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
     row["ci_deg_at_15"] = ci[PAPER_ITERATIONS] if len(ci) > PAPER_ITERATIONS else None
     for finger, v in (errors.get("link_length_mm") or {}).items():
         row[f"length_mm.{finger}"] = v
-    # The paper's novel-finger unknown is the proximal link alone (METHOD.md 3, 6); the pad's
-    # offset along the distal link is ours (our novel fingers change it too), so the paper's
-    # figure is compared with the proximal links' mean, shown beside the mean over both.
-    by_joint = errors.get("link_length_mm_by_joint") or {}
-    proximal = [v for joint, v in by_joint.items() if joint.endswith(".proximal")]
-    if proximal:
-        row["proximal_link_mm"] = float(np.mean(proximal))
+    if (links := _proximal_links_mm(errors)) is not None:
+        row["proximal_link_mm"] = links
     for joint, v in (errors.get("stiffness") or {}).items():
         row[f"stiffness.{joint}"] = v
     # The same figures of the posterior median (vlr.filter.Summary), where recorded.
@@ -327,14 +335,10 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
     if median:
         row["proximal_deg_median"] = median.get("proximal_deg_mean")
         row["joints_deg_median"] = median.get("joint_deg_mean")
-        by_it = _get(rec, ("result", "proximal_median_deg_by_iteration")) or []
-        row["proximal_deg_median_at_15"] = (
-            by_it[PAPER_ITERATIONS] if len(by_it) > PAPER_ITERATIONS
-            else by_it[-1] if by_it and _get(rec, ("result", "converged")) else None)
-        proximal = [v for joint, v in (median.get("link_length_mm_by_joint") or {}).items()
-                    if joint.endswith(".proximal")]
-        if proximal:
-            row["proximal_link_mm_median"] = float(np.mean(proximal))
+        row["proximal_deg_median_at_15"] = _at_paper_budget(
+            rec, "proximal_median_deg_by_iteration")
+        if (links := _proximal_links_mm(median)) is not None:
+            row["proximal_link_mm_median"] = links
         for joint, v in (median.get("stiffness") or {}).items():
             row[f"stiffness_median.{joint}"] = v
     if rec.get("status") != "ok":
