@@ -18,7 +18,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out", type=Path, help="a sweep's output folder")
     ap.add_argument("--on-stop-deg", type=float, default=0.1,
-                    help="a joint whose truth is within this of 0 rests on its open stop")
+                    help="a distal joint whose truth is within this of 0 rests on its open stop")
     args = ap.parse_args()
     paths = sorted((args.out / "trials").glob("*.json"))
     if not paths:
@@ -30,15 +30,18 @@ def main() -> int:
             by_case.setdefault(rec["case"], []).append(rec["result"])
     for case, results in by_case.items():
         print(f"{case} ({len(results)} trials): joint  truth  mean-err  median-err  "
-              "[min .. max over trials, degrees]; on stop: median-err range")
+              "[min .. max over trials, degrees]; joints on their stop")
         for joint in results[0]["truth_theta"]:
             truth = np.degrees([r["truth_theta"][joint] for r in results])
             est = {k: np.degrees([r["estimates"][joint][k] for r in results]) - truth
-                   for k in ("mean", "median")}
-            on = np.abs(truth) < args.on_stop_deg
+                   for k in ("mean", "median", "high")}
+            # The distal joints' open stop is at 0 (models/fingers); the proximal's at -20.
+            on = (np.abs(truth) < args.on_stop_deg) & (not joint.endswith(".0"))
             stop = (f"{on.sum()} on stop: median {est['median'][on].min():+.2f} .. "
                     f"{est['median'][on].max():+.2f}, mean {est['mean'][on].min():+.2f} .. "
-                    f"{est['mean'][on].max():+.2f}" if on.any() else "")
+                    f"{est['mean'][on].max():+.2f}, the interval's top "
+                    f"{est['high'][on].min():+.1f} .. {est['high'][on].max():+.1f}"
+                    if on.any() else "")
             print(f"  {joint:8s} {truth.min():6.1f} .. {truth.max():5.1f}  "
                   f"{est['mean'].min():+5.1f} .. {est['mean'].max():+5.1f}  "
                   f"{est['median'].min():+5.1f} .. {est['median'].max():+5.1f}  {stop}")
