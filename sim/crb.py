@@ -70,6 +70,9 @@ class CrbSettings:
         if self.trial.backend not in ("sim", "synthetic"):
             raise UserError(f"backend {self.trial.backend!r}: the bound is linearised at the "
                             "true grasp; use the sim or the synthetic world")
+        if "noise" in self.trial.unknowns:
+            raise UserError("unknown 'noise': the bound is taken at the likelihood's given "
+                            "scales (--sigma-*), not at an identified factor on them; drop it")
         if not isinstance(self.candidates, int) or self.candidates < 0:
             raise UserError(f"candidates {self.candidates!r} must be an integer >= 0")
         if not 0 < self.relative_step < 0.5:

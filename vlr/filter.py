@@ -41,14 +41,19 @@ __all__ = [
 
 # --------------------------------------------------------------------------- unknowns
 
+# The "noise" unknown's default prior: uniform factors on the configured pose scales. The
+# top is the configured scale (set for the objects the model gets worst); the bottom a
+# quarter of it, about the camera's own error at the sim's default scales (0.05 mm of 0.2).
+NOISE_PRIOR = (0.25, 1.0)
+
 @dataclass(frozen=True)
 class Unknown:
     """One unknown physical parameter sampled as a particle dimension (METHOD.md 3).
 
     Attributes:
         spec: the spec string, e.g. "stiffness:thumb.distal".
-        kind: "stiffness" | "length" | "tendon".
-        finger: finger index, or -1 for all fingers ("tendon" alone).
+        kind: "stiffness" | "length" | "tendon" | "noise".
+        finger: finger index, or -1 for all fingers ("tendon", "noise").
         joint: joint index (stiffness, length), else -1.
         prior: (low, high) of the uniform prior [SI units].
     """
@@ -62,13 +67,23 @@ class Unknown:
 
 def parse_unknown(spec: str, model: HandModel,
                   prior: tuple[float, float] | None = None) -> Unknown:
-    """Parse "stiffness:FINGER.JOINT", "length:FINGER.JOINT", "tendon" or "tendon:FINGER".
+    """Parse "stiffness:FINGER.JOINT", "length:FINGER.JOINT", "tendon", "tendon:FINGER" or
+    "noise".
 
     Default priors (ours): stiffness 0.25-4x nominal; length 0.5-1.3x nominal (a replaced
-    finger may be much shorter: NF1 is 40 mm against 62 mm); tendon stiffness 0.5-2x nominal.
+    finger may be much shorter: NF1 is 40 mm against 62 mm); tendon stiffness 0.5-2x nominal;
+    noise, the factor on the likelihood's pose scales (`vlr.observation`, "The model error's
+    size"), `NOISE_PRIOR`: the configured scales are its top, set for the worst object.
     A "distal" length is the pad centre's offset along the distal link (kinematics.py).
     """
     kind, _, rest = spec.partition(":")
+    if kind == "noise":
+        if rest:
+            raise ValueError(f"unknown parameter spec {spec!r}: 'noise' takes no finger")
+        lo, hi = prior or NOISE_PRIOR
+        if not 0 < lo <= hi:
+            raise ValueError(f"noise prior ({lo}, {hi}) must satisfy 0 < low <= high")
+        return Unknown(spec, kind, -1, -1, (float(lo), float(hi)))
     if kind == "tendon":
         finger = model.finger_index(rest) if rest else -1
         nominal = model.tendon_stiffness
@@ -76,7 +91,7 @@ def parse_unknown(spec: str, model: HandModel,
         return Unknown(spec, kind, finger, -1, (float(lo), float(hi)))
     if kind not in ("stiffness", "length") or "." not in rest:
         raise ValueError(f"unknown parameter spec {spec!r}; use stiffness:FINGER.JOINT, "
-                         "length:FINGER.JOINT, tendon or tendon:FINGER")
+                         "length:FINGER.JOINT, tendon, tendon:FINGER or noise")
     fname, jname = rest.split(".", 1)
     i, k = model.finger_index(fname), model.joint_index(jname)
     if kind == "stiffness":
@@ -89,6 +104,8 @@ def parse_unknown(spec: str, model: HandModel,
 
 
 def _get_unknown(state: ParticleState, u: Unknown) -> np.ndarray:
+    if u.kind == "noise":
+        return state.noise
     if u.kind == "stiffness":
         return state.stiffness[:, u.finger, u.joint]
     if u.kind == "length":
@@ -97,7 +114,9 @@ def _get_unknown(state: ParticleState, u: Unknown) -> np.ndarray:
 
 
 def _set_unknown(state: ParticleState, u: Unknown, values: np.ndarray) -> None:
-    if u.kind == "stiffness":
+    if u.kind == "noise":
+        state.noise[:] = values
+    elif u.kind == "stiffness":
         state.stiffness[:, u.finger, u.joint] = values
     elif u.kind == "length":
         state.segments[:, u.finger, u.joint] = values

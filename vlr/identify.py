@@ -149,6 +149,8 @@ def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
     base = len(post.mean) - len(pf.unknowns)
     ue, uc, ue_med = {}, {}, {}
     for j, u in enumerate(pf.unknowns):
+        if u.kind == "noise":  # the likelihood's own scale: no true value to score
+            continue
         if u.kind == "stiffness":
             true = truth.stiffness[u.finger, u.joint]
         elif u.kind == "length":

@@ -258,6 +258,9 @@ class ParticleState:
         stiffness: (P, N, K) joint spring rates [N m/rad].
         tendon: (P, N) series tendon stiffness [N/m].
         valid: (P,) False once a solve failed: zero weight.
+        noise: (P,) each particle's factor on the likelihood's pose scales (1: the scales
+            as configured; `vlr.observation`); sampled when the model error's size is an
+            unknown ("noise", `vlr.filter.parse_unknown`). The motion model ignores it.
     """
 
     theta: np.ndarray
@@ -269,6 +272,7 @@ class ParticleState:
     stiffness: np.ndarray
     tendon: np.ndarray
     valid: np.ndarray
+    noise: np.ndarray
 
     @property
     def n(self) -> int:
@@ -301,7 +305,7 @@ class ParticleState:
                  segments=np.broadcast_to(model.segments, (n, nf, nk)).copy(),
                  stiffness=np.broadcast_to(model.stiffness, (n, nf, nk)).copy(),
                  tendon=np.full((n, nf), model.tendon_stiffness),
-                 valid=np.ones(n, dtype=bool))
+                 valid=np.ones(n, dtype=bool), noise=np.ones(n))
         st.anchor_to_pose(model)
         return st
 

@@ -47,6 +47,20 @@ the pose (`TensionedObservation`; the sim's static tensions, `vlr.hand.ApplyRepo
 (Eq. 7 compliant, `vlr.motion.MotionModel.tensions`). The tension is the springs' torque
 through the pulleys, so it reads the joint angles directly, where the pose's information lies
 mostly along the object's turn (docs/RESULTS.md 2, "What would converge in 15").
+
+The model error's size (session 25): the scales above are set for the worst of the objects,
+and a trial on an object the model gets right weighs its observations as loosely as one on
+an object it gets wrong. With the "noise" unknown (`vlr.filter.parse_unknown`) each particle
+carries a factor s on every pose scale (`ParticleState.noise`; the tension's scale is a
+sensor's and keeps its own), the covariance becomes s^2 Sigma, and
+
+    log p = -e^T Sigma^-1 e / (2 s^2) - 6 log s + (the terms above),
+
+the normalisation -6 log s charging a wide tolerance for its width (the Occam factor of a
+hierarchical noise scale). The filter then identifies the size of the model's error with
+the rest of the particle: the posterior over s follows the residuals of the particles that
+fit. A bias the other unknowns can absorb leaves small residuals and so is not seen by s;
+that is the risk of a narrower likelihood, and why the trials measure coverage.
 """
 
 from __future__ import annotations
@@ -59,6 +73,10 @@ from scipy.spatial.transform import Rotation
 
 from vlr.kinematics import HandModel, pom_from_contacts
 from vlr.motion import ParticleState
+
+# The pose error's dimensions (position and rotation, 3 each): a factor s on every pose scale
+# multiplies the Gaussian's normalisation by s^-6.
+POSE_DIMS = 6
 
 __all__ = ["PoseObservation", "PomObservation", "TensionedObservation", "ObservationModel",
            "rotation_angle", "rotation_error", "grasp_turn", "pom_forward_kinematics"]
@@ -195,31 +213,42 @@ class ObservationModel:
         `motion`: each particle's predicted POM displacement [m] and rotation angle [rad]
         over the action, (P,) each; used when `motion_fraction` > 0 (module docstring).
         `tensions`: each particle's predicted tendon tensions [N], (P, N); weighed against
-        the observation's when `sigma_tension` > 0 and it has them (module docstring)."""
-        ll = self._pose_log_likelihood(state, obs, motion)
+        the observation's when `sigma_tension` > 0 and it has them (module docstring).
+        `state.noise` (P,), where the state has it: each particle's factor on the pose's
+        scales (module docstring, "The model error's size")."""
+        quad, log_norm = self._pose_terms(state, obs, motion)
+        noise = getattr(state, "noise", None)
+        if noise is None:
+            ll = -0.5 * quad + log_norm
+        else:
+            s = np.asarray(noise, dtype=float)
+            ll = -0.5 * quad / (s * s) + log_norm - POSE_DIMS * np.log(s)
         observed = getattr(obs, "tensions", None)
         if self.sigma_tension > 0 and tensions is not None and observed is not None:
             r = (np.asarray(tensions) - np.asarray(observed)[None, :]) / self.sigma_tension
             ll = ll - 0.5 * (r * r).sum(axis=-1)
         return np.where(state.valid & np.isfinite(ll), ll, -np.inf)
 
-    def _pose_log_likelihood(self, state: ParticleState, obs: PoseObservation,
-                             motion: tuple[np.ndarray, np.ndarray] | None) -> np.ndarray:
-        """The pose's term of `log_likelihood` (Eq. 5), (P,)."""
+    def _pose_terms(self, state: ParticleState, obs: PoseObservation,
+                    motion: tuple[np.ndarray, np.ndarray] | None
+                    ) -> tuple[np.ndarray, np.ndarray | float]:
+        """The pose's term of `log_likelihood` (Eq. 5) as its quadratic form and its log
+        normalisation (relative to the configured scales): log p = -quad / 2 + log_norm."""
         if self.sigma_turn > 0:
-            return self._turn_log_likelihood(state, obs)
+            return self._turn_terms(state, obs)
         e_pos, e_rot = self.errors(state, obs)
         if self.motion_fraction > 0 and motion is not None:
             k = self.motion_fraction
             s_pos = np.sqrt(self.sigma_pos ** 2 + (k * np.asarray(motion[0])) ** 2)
             s_rot = np.sqrt(self.sigma_rot ** 2 + (k * np.asarray(motion[1])) ** 2)
-            return (-0.5 * ((e_pos / s_pos) ** 2 + (e_rot / s_rot) ** 2)
-                    - np.log(s_pos / self.sigma_pos) - np.log(s_rot / self.sigma_rot))
-        return -0.5 * ((e_pos / self.sigma_pos) ** 2 + (e_rot / self.sigma_rot) ** 2)
+            return ((e_pos / s_pos) ** 2 + (e_rot / s_rot) ** 2,
+                    -np.log(s_pos / self.sigma_pos) - np.log(s_rot / self.sigma_rot))
+        return (e_pos / self.sigma_pos) ** 2 + (e_rot / self.sigma_rot) ** 2, 0.0
 
-    def _turn_log_likelihood(self, state: ParticleState, obs: PoseObservation) -> np.ndarray:
-        """Gaussian log-likelihood with the turn's covariance D + s^2 v v^T (module
-        docstring), normalised against D alone, (P,)."""
+    def _turn_terms(self, state: ParticleState,
+                    obs: PoseObservation) -> tuple[np.ndarray, np.ndarray]:
+        """Gaussian with the turn's covariance D + s^2 v v^T (module docstring), normalised
+        against D alone: (quadratic form, log normalisation), (P,) each."""
         pos, rot = self.predict(state)
         # A failed solve's pose may be NaN or degenerate, which the rotation vector refuses;
         # its weight is -inf anyway (`log_likelihood`).
@@ -232,4 +261,4 @@ class ObservationModel:
         s2 = self.sigma_turn ** 2
         vde = (v * d_inv * e).sum(axis=-1)
         g = 1.0 + s2 * (v * d_inv * v).sum(axis=-1)
-        return -0.5 * ((e * e * d_inv).sum(axis=-1) - s2 * vde ** 2 / g) - 0.5 * np.log(g)
+        return (e * e * d_inv).sum(axis=-1) - s2 * vde ** 2 / g, -0.5 * np.log(g)

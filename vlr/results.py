@@ -128,8 +128,9 @@ def write_outputs(out: Path, result, summary: dict, model, truths: list | None =
     if result.scores and unknowns:
         # the truth of each unknown per iteration: the scored estimate minus its error
         base = hist["mean"].shape[1] - len(unknowns)
+        # (NaN for an unknown without a true value: the likelihood's "noise")
         hist["truth_unknowns"] = np.array(
-            [[hist["mean"][i, base + j] - sc.unknown_error[spec]
+            [[hist["mean"][i, base + j] - sc.unknown_error.get(spec, np.nan)
               for j, spec in enumerate(unknowns)] for i, sc in enumerate(result.scores)])
     with atomic_path(out / "history.npz") as tmp:
         np.savez_compressed(tmp, **hist)
@@ -139,7 +140,8 @@ def write_outputs(out: Path, result, summary: dict, model, truths: list | None =
 
 # Plot units of the unknowns: (scale from SI, axis label).
 _UNKNOWN_UNITS = {"stiffness": (1.0, "stiffness [N m/rad]"), "length": (1e3, "length [mm]"),
-                  "tendon": (1e-3, "tendon stiffness [N/mm]")}
+                  "tendon": (1e-3, "tendon stiffness [N/mm]"),
+                  "noise": (1.0, "factor on the pose scales")}
 
 
 def _plot(path: Path, hist: dict, model, n: int, k: int, unknowns: list[str] = ()) -> None:

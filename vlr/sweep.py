@@ -341,6 +341,10 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
             row["proximal_link_mm_median"] = links
         for joint, v in (median.get("stiffness") or {}).items():
             row[f"stiffness_median.{joint}"] = v
+    # The likelihood's identified scale factor ("noise" unknown), where sampled.
+    noise = _get(rec, ("result", "unknown_estimates", "noise", "median"))
+    if noise is not None:
+        row["noise_scale"] = noise
     if rec.get("status") != "ok":
         row["error"] = rec.get("error")
     return row
@@ -427,6 +431,8 @@ def summarize_rows(rows: list[dict[str, Any]],
             digits = 4 if col.startswith("stiffness") else 2
             unit = "N m/rad" if col.startswith("stiffness") else "mm"
             s[f"{col} error [{unit}]"] = _fmt([r.get(col) for r in ok], digits)
+        if any(r.get("noise_scale") is not None for r in ok):
+            s["noise scale"] = _fmt([r.get("noise_scale") for r in ok], 2)
         out.append(s)
     return out
 

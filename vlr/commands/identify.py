@@ -28,7 +28,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--particles", type=int, default=60_000)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--unknown", action="append", default=[],
-                   help="extra unknown, e.g. stiffness:thumb.distal or length:left.proximal")
+                   help="extra unknown, e.g. stiffness:thumb.distal or length:left.proximal; "
+                   "'noise' identifies the size of the model's error (a factor on the "
+                   "likelihood's pose scales, vlr.observation)")
     p.add_argument("--max-iterations", type=int, default=40)
     p.add_argument("--min-iterations", type=int, default=0,
                    help="do not stop on convergence before this many actions")
