@@ -46,6 +46,7 @@ __all__ = [
 # quarter of it, about the camera's own error at the sim's default scales (0.05 mm of 0.2).
 NOISE_PRIOR = (0.25, 1.0)
 
+
 @dataclass(frozen=True)
 class Unknown:
     """One unknown physical parameter sampled as a particle dimension (METHOD.md 3).
