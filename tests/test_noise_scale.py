@@ -103,3 +103,17 @@ def test_the_sweep_row_gives_the_identified_factor():
     assert summarize_rows([row])[0]["noise scale"] == "0.42"
     del rec["result"]["unknown_estimates"]["noise"]
     assert "noise_scale" not in _row(rec)
+
+
+def test_a_trials_noise_prior_reaches_the_filter_and_bad_ones_are_named():
+    from vlr.errors import UserError
+    from vlr.trial import TrialSettings, identify_config
+
+    model = HandModel.from_spec(load_hand("modelo"))
+    s = TrialSettings(backend="synthetic", unknowns=["noise"], noise_prior=[0.5, 1])
+    assert identify_config(s, model).filter.priors == {"noise": (0.5, 1.0)}
+    assert s.to_dict()["noise_prior"] == [0.5, 1.0]
+    with pytest.raises(UserError, match="noise_prior"):
+        TrialSettings(backend="synthetic", unknowns=["noise"], noise_prior=[0.0, 1.0])
+    with pytest.raises(UserError, match="add it to unknowns"):
+        TrialSettings(backend="synthetic", noise_prior=[0.5, 1.0])

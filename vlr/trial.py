@@ -169,6 +169,9 @@ class TrialSettings:
             slide_friction or spin_friction (the friction in the energy already slides).
         jitter_h: the filter's Liu-West bandwidth (`vlr.filter.FilterConfig.jitter_h`);
             None: its default.
+        noise_prior: [low, high] of the "noise" unknown's uniform prior (a factor on the
+            likelihood's pose scales); None: `vlr.filter.NOISE_PRIOR`. Needs "noise" among
+            the unknowns.
         link_scaling: a link of unknown length weighs as the nominal link scaled to its
             length (`vlr.motion.MotionConfig.link_scaling`); False: the nominal weights.
         anneal_stages: the filter's most weighting stages per observation
@@ -211,6 +214,7 @@ class TrialSettings:
     cone_return: float | None = None
     link_scaling: bool = False
     jitter_h: float | None = None
+    noise_prior: tuple[float, float] | None = None
     config: str | None = None
 
     def __post_init__(self) -> None:
@@ -327,6 +331,14 @@ class TrialSettings:
                                                           "contact_stiffness",
                                                           "cone_return"))):
                 raise bad(name, "a number")
+        if self.noise_prior is not None:
+            if (not isinstance(self.noise_prior, list | tuple) or len(self.noise_prior) != 2
+                    or not all(is_real(v) for v in self.noise_prior)
+                    or not 0 < self.noise_prior[0] <= self.noise_prior[1]):
+                raise bad("noise_prior", "[low, high] with 0 < low <= high")
+            if "noise" not in self.unknowns:
+                raise bad("noise_prior", "a prior of the 'noise' unknown: add it to unknowns")
+            object.__setattr__(self, "noise_prior", tuple(float(v) for v in self.noise_prior))
         if self.jitter_h is not None and not (is_real(self.jitter_h)
                                               and 0 <= self.jitter_h < 1):
             raise bad("jitter_h", "a number in [0, 1) (or none: the filter's default)")
@@ -389,6 +401,8 @@ class TrialSettings:
             d["nominal_theta_deg"] = list(self.nominal_theta_deg)
         if self.action_range_mm is not None:
             d["action_range_mm"] = list(self.action_range_mm)
+        if self.noise_prior is not None:
+            d["noise_prior"] = list(self.noise_prior)
         return d
 
     @property
@@ -615,6 +629,8 @@ def identify_config(settings: TrialSettings, model):
     fcfg = FilterConfig(n_particles=settings.particles, seed=settings.seed,
                         motion=settings.motion_config(),
                         unknowns=settings.unknowns,
+                        priors=({} if settings.noise_prior is None
+                                else {"noise": settings.noise_prior}),
                         theta_spread=float(np.radians(settings.grasp_guess[1])),
                         anneal_stages=settings.anneal_stages,
                         contact_prior=settings.contact_prior_in_effect,

@@ -106,6 +106,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with rolling contacts: after each action return the contacts' "
                    "stretch onto the friction cone MU N and settle again (a cheap stand-in "
                    "for --slide-friction; default off; the sim's pads have 1.0)")
+    p.add_argument("--noise-prior", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
+                   help="with --unknown noise: the uniform prior of the factor on the "
+                   "likelihood's pose scales (default 0.25 1)")
     p.add_argument("--jitter-h", type=float, default=None, metavar="H",
                    help="the filter's Liu-West bandwidth, in [0, 1) (default 0.4; "
                    "RESULTS.md section 5: narrower converges, confidently wrong)")
@@ -194,7 +197,7 @@ def run(args: argparse.Namespace) -> int:
         active_criterion=args.active_criterion, active_min_force_n=args.active_min_force,
         anneal_stages=args.anneal_stages,
         contact_stiffness=args.contact_stiffness, cone_return=args.cone_return,
-        link_scaling=args.link_scaling, jitter_h=args.jitter_h,
+        link_scaling=args.link_scaling, jitter_h=args.jitter_h, noise_prior=args.noise_prior,
         action_range_mm=args.action_range_mm, action_band_mm=args.action_band_mm)
     bar = None
 
