@@ -117,3 +117,14 @@ def test_a_trials_noise_prior_reaches_the_filter_and_bad_ones_are_named():
         TrialSettings(backend="synthetic", unknowns=["noise"], noise_prior=[0.0, 1.0])
     with pytest.raises(UserError, match="add it to unknowns"):
         TrialSettings(backend="synthetic", noise_prior=[0.5, 1.0])
+
+
+def test_the_bound_refuses_the_noise_unknown():
+    """`vlr crb` bounds the filter at its given scales; a sampled factor on them has no
+    place in that linearisation, so it says so in one line."""
+    from sim.crb import CrbSettings
+    from vlr.errors import UserError
+    from vlr.trial import TrialSettings
+
+    with pytest.raises(UserError, match="unknown 'noise'"):
+        CrbSettings(trial=TrialSettings(backend="sim", unknowns=("noise",)))
