@@ -76,6 +76,9 @@ class GapSettings:
             (`sim.pads`): known, like the pad's radius.
         contact_stiffness: the model's contact penalty k_c [N/m] (`MotionConfig`), normal
             and tangential alike.
+        spin_memory: in the friction rung, each pad keeps its spin torque from one command
+            change to the next (`MotionConfig.spin_memory`): along the open-loop path; the
+            per-action gap restarts from a settle, which holds none.
     """
 
     object: str = "apple"
@@ -90,6 +93,7 @@ class GapSettings:
     slide_friction: float = SLIDE_FRICTION
     spin_friction: float = TORSION_FRICTION
     contact_stiffness: float = MotionConfig.contact_stiffness
+    spin_memory: bool = False
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.contact_stiffness) and self.contact_stiffness > 0):
@@ -239,7 +243,8 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
                        contact_stiffness=settings.contact_stiffness)
     if friction == "friction":
         cfg = replace(cfg, slide_friction=settings.slide_friction,
-                      spin_friction=settings.spin_friction)
+                      spin_friction=settings.spin_friction,
+                      spin_memory=settings.spin_memory)
     elif friction == "cone":
         cfg = replace(cfg, cone_return=settings.slide_friction)
     motion = MotionModel(model, obj, cfg)
@@ -363,6 +368,7 @@ def gap_report(settings: GapSettings,
         "spin_stiffness": settings.spin_stiffness,
         "slide_friction": settings.slide_friction,
         "spin_friction": settings.spin_friction,
+        "spin_memory": settings.spin_memory,
         "contact_stiffness": settings.contact_stiffness,
         "true_motion": {"position_mm_mean": float(np.mean(true_p)),
                         "orientation_deg_mean": float(np.mean(true_r))},
@@ -443,6 +449,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--contact-stiffness", type=float, default=MotionConfig.contact_stiffness,
                    metavar="K_C", help="the model's contact penalty [N/m] (default "
                    f"{MotionConfig.contact_stiffness:g})")
+    p.add_argument("--spin-memory", action="store_true",
+                   help="in the friction rung, each pad keeps its spin torque from one "
+                   "action to the next (MotionConfig.spin_memory; shows along the open-loop "
+                   "path)")
     p.add_argument("--json", help="write the report (per object, per model rung) as JSON")
     p.set_defaults(func=run)
 
@@ -466,7 +476,8 @@ def run(args: argparse.Namespace) -> int:
                                spin_stiffness=args.spin_stiffness,
                                slide_friction=args.slide_friction,
                                spin_friction=args.spin_friction,
-                               contact_stiffness=args.contact_stiffness)
+                               contact_stiffness=args.contact_stiffness,
+                               spin_memory=args.spin_memory)
         rep = gap_report(settings)
         print(format_report(rep) + "\n", flush=True)
         reports.append(rep)

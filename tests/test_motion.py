@@ -301,6 +301,60 @@ def test_a_settle_has_no_friction(modelo):
     np.testing.assert_array_equal(a.anchors, b.anchors)
 
 
+def test_a_stored_spin_torque_matches_reference(modelo):
+    """`MotionConfig.spin_memory`: a pad's stored spin torque offsets its torsional friction
+    curve (f'(0) is the stored torque): the kernel against the NumPy reference, with one
+    pad inside its cone, one near its edge and one beyond (held at the clip)."""
+    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
+    _, st, u0 = grasp(modelo)
+    mm = MotionModel(modelo, obj, replace(FRICTION, spin_memory=True))
+    roll = mm.rolling_frames(st)[0]
+    shake(st, 6, 5e-4, 5e-4, 1e-5)  # spins of about the smoothing, where the offset shows
+    roll[:, kern.RL_FORCE] = (2.0, 1.0, 0.5)
+    roll[:, kern.RL_SPIN_TORQUE] = (0.5e-3, -0.98e-3, 2e-3)  # N m; cones 2, 1, 0.5 mN m
+    check_derivatives(mm, st, u0, roll, e_rel=1e-10, hess_atol=None)
+    g = mm.evaluate(st, 0, u0, roll)[1]
+    roll[:, kern.RL_SPIN_TORQUE] = 0.0
+    # The stored torques (0.5-1 mN m) show in the gradient's rotational part.
+    assert np.abs(g - mm.evaluate(st, 0, u0, roll)[1])[6:].max() > 2e-4
+
+
+def test_spin_memory_makes_the_frictional_state_a_fixed_point(modelo):
+    """Solved again and again at the command an action ended at, a grasp with spin memory
+    stops moving after the first solve (which re-settles the pads' re-contact); without
+    memory every solve drops the pads' spin torques again and the grasp keeps moving. Each
+    stored torque lies inside its cone mu_t N."""
+    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
+    weightless = dict(gravity=(0.0, 0.0, 0.0))
+    _, st, u0 = grasp(modelo, config=replace(ROLL, **weightless), theta=(0.3, 0.3))
+    u1 = u0 + np.array([6e-4, -4e-4, 0.0])
+    moved = {}
+    for memory in (True, False):
+        mm = MotionModel(modelo, obj, replace(FRICTION, spin_memory=memory, **weightless))
+        s = st.copy()
+        assert np.all(mm.solve(s, u1, u_from=u0)[0] == 0)
+        if memory:
+            cone = FRICTION.spin_friction * mm.normal_forces(s, mm.rolling_frames(s)[..., :3])
+            assert np.abs(s.spin_torque).max() > 1e-5  # the pads hold torques
+            assert np.all(np.abs(s.spin_torque) <= cone + 1e-12)
+        else:
+            assert not s.spin_torque.any()
+        assert np.all(mm.solve(s, u1, u_from=u1)[0] == 0)
+        before = s.theta.copy()
+        assert np.all(mm.solve(s, u1, u_from=u1)[0] == 0)
+        moved[memory] = np.degrees(np.abs(s.theta - before).max())
+    assert moved[True] < 0.002 < 0.005 < moved[False], moved
+
+
+def test_a_settle_zeroes_the_stored_spin_torques(modelo):
+    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
+    _, st, u0 = grasp(modelo, config=ROLL)
+    mm = MotionModel(modelo, obj, replace(FRICTION, spin_memory=True))
+    st.spin_torque[:] = 1e-4
+    mm.solve(st, u0)
+    assert not st.spin_torque.any()
+
+
 @pytest.mark.parametrize("kw", [dict(slide_friction=0.0), dict(slide_friction=-1.0),
                                 dict(spin_friction=-1e-3), dict(spin_smoothing=0.0)])
 def test_bad_friction_settings_are_named(kw):

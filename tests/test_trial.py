@@ -83,13 +83,18 @@ def test_pad_friction_reaches_the_filter_and_needs_rolling():
     from vlr.trial import identify_config
 
     s = TrialSettings(backend="synthetic", particles=50, rolling=True, slide_friction=1.0,
-                      spin_friction=0.001)
+                      spin_friction=0.001, spin_memory=True)
     world = open_world(s)
     try:
         motion = identify_config(s, world.model).filter.motion
     finally:
         world.close()
     assert motion.rolling and motion.slide_friction == 1.0 and motion.spin_friction == 0.001
+    assert motion.spin_memory and not TrialSettings(rolling=True).motion_config().spin_memory
+    with pytest.raises(UserError, match="spin_memory .*set spin_friction too"):
+        TrialSettings(rolling=True, spin_memory=True)
+    with pytest.raises(UserError, match="spin_memory 'yes'"):
+        TrialSettings(rolling=True, spin_friction=0.001, spin_memory="yes")
     assert math.isinf(TrialSettings(rolling=True).motion_config().slide_friction)
     with pytest.raises(UserError, match="set rolling too"):
         TrialSettings(backend="synthetic", slide_friction=1.0)

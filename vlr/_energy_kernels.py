@@ -33,7 +33,9 @@ N_PRM = 14
 # normal in the palm frame (3), the finger's summed joint angles (1), the object rotation
 # R_PO (9, row-major) at the start of the solve, and the contact's normal force then (1) [N]
 # (it sets the friction's limits).
-RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, RL_FORCE, N_RL = 0, 3, 6, 7, 16, 17
+RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, RL_FORCE, RL_SPIN_TORQUE, N_RL = 0, 3, 6, 7, 16, 17, 18
+# A stored spin torque's share of its cone is held below this (`spin_offset`).
+SPIN_MEMORY_CLIP = 0.99
 
 
 @njit(cache=True)
@@ -195,6 +197,17 @@ def _spin_rate(i, k_n, th, rl, R, rb, vk):
 
 
 @njit(cache=True)
+def spin_offset(torque, tau_max, eps):
+    """The spin s0 [rad] at which the smoothed torsional friction tau_max s / sqrt(s^2 +
+    eps^2) gives `torque` (its share of the cone held under `SPIN_MEMORY_CLIP`); 0 without
+    a cone."""
+    if tau_max <= 0.0 or torque == 0.0:
+        return 0.0
+    t = min(max(torque / tau_max, -SPIN_MEMORY_CLIP), SPIN_MEMORY_CLIP)
+    return eps * t / math.sqrt(1.0 - t * t)
+
+
+@njit(cache=True)
 def _spin_apply(i, k_n, f1, f2, cx, jw0, jw1, jw2, gA, A, B, gC, C):
     """Accumulate an energy f(s) of the spin: gradient f'(s) J, Gauss-Newton Hessian
     f''(s) J J^T (J from `_spin_rate`)."""
@@ -342,11 +355,15 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                 # tau_max (sqrt(s^2 + eps^2) - eps) so that Newton sees a C2 energy. (An
                 # elliptic cone coupling it with the slide, as MuJoCo's, was measured by
                 # `vlr gap`: no better on average, and 3 of 30 wine glass solves failed.)
+                # A torque the pad stored by the last command change (`MotionConfig.
+                # spin_memory`) starts the curve at its offset s0: f'(0) is that torque.
                 tau = mu_t * rl[i, RL_FORCE]
                 eps = prm[P_SPIN_EPS]
-                r = math.sqrt(s_sp * s_sp + eps * eps)
-                e += tau * (r - eps)
-                f1 += tau * s_sp / r
+                s0 = spin_offset(rl[i, RL_SPIN_TORQUE], tau, eps)
+                x = s_sp + s0
+                r = math.sqrt(x * x + eps * eps)
+                e += tau * (r - math.sqrt(s0 * s0 + eps * eps))
+                f1 += tau * x / r
                 f2 += tau * eps * eps / (r * r * r)
             if spin_on:
                 # The pad's elastic torsional stiffness (`MotionConfig.spin_stiffness`).

@@ -124,6 +124,14 @@ class MotionConfig:
             its own rung (RESULTS.md 5); its cost is one settle, where the friction's Huber
             energy costs 3-5x the solve. inf: off. The sim's pads have 1.0
             (`sim.pads.SLIDE_FRICTION`).
+        spin_memory: with the pads' torsional friction, each pad keeps the spin torque its
+            stick held at the end of a command change into the next one
+            (`ParticleState.spin_torque`), as its tangential stick keeps its force in the
+            stretch: a pad that slipped one way slips on at once under more of the same
+            torque and sticks through twice the cone the other way. False: every command
+            change starts each pad at zero spin torque, so a particle's first step at the
+            old command rebalances the torques it dropped. A settle spins the pads freely
+            and zeroes them either way.
         spin_smoothing: the spin [rad] over which the friction's |s| is rounded off
             (Newton needs a smooth energy); the stick's compliance is tau_max over it.
         follow_substeps: a particle whose solve of a command change (`solve(...,
@@ -147,6 +155,7 @@ class MotionConfig:
     spin_stiffness: float = 0.0
     slide_friction: float = math.inf
     spin_friction: float = 0.0
+    spin_memory: bool = False
     cone_return: float = math.inf
     spin_smoothing: float = 1e-3
     follow_substeps: int = 16
@@ -261,6 +270,8 @@ class ParticleState:
         noise: (P,) each particle's factor on the likelihood's pose scales (1: the scales
             as configured; `vlr.observation`); sampled when the model error's size is an
             unknown ("noise", `vlr.filter.parse_unknown`). The motion model ignores it.
+        spin_torque: (P, N) the spin torque each pad's torsional friction holds [N m]
+            (`MotionConfig.spin_memory`; 0 without it).
     """
 
     theta: np.ndarray
@@ -273,6 +284,7 @@ class ParticleState:
     tendon: np.ndarray
     valid: np.ndarray
     noise: np.ndarray
+    spin_torque: np.ndarray
 
     @property
     def n(self) -> int:
@@ -305,7 +317,8 @@ class ParticleState:
                  segments=np.broadcast_to(model.segments, (n, nf, nk)).copy(),
                  stiffness=np.broadcast_to(model.stiffness, (n, nf, nk)).copy(),
                  tendon=np.full((n, nf), model.tendon_stiffness),
-                 valid=np.ones(n, dtype=bool), noise=np.ones(n))
+                 valid=np.ones(n, dtype=bool), noise=np.ones(n),
+                 spin_torque=np.zeros((n, nf)))
         st.anchor_to_pose(model)
         return st
 
@@ -399,12 +412,13 @@ class MotionModel:
 
     def rolling_frames(self, state: ParticleState, normals_o: np.ndarray | None = None,
                        forces: bool = True) -> np.ndarray:
-        """(P, N, 17) what the rolling term holds fixed during a solve: each contact's local
+        """(P, N, 18) what the rolling term holds fixed during a solve: each contact's local
         centre of curvature in O, a - rho m, its normal in the palm frame, R m (m: the
         object's outward normal at the contact, in O), the finger's summed joint angles, the
-        object's rotation (for the spin term) and the contact's normal force
-        (`normal_forces`; it sets the friction's limits; 0 if not `forces`). `normals_o`: m
-        if already computed (`vlr.surface.surface_normals`)."""
+        object's rotation (for the spin term), the contact's normal force
+        (`normal_forces`; it sets the friction's limits; 0 if not `forces`) and the spin
+        torque the pad holds (`ParticleState.spin_torque`). `normals_o`: m if already
+        computed (`vlr.surface.surface_normals`)."""
         m = (surface_normals(self.model, state.theta, state.normals, state.rot)
              if normals_o is None else normals_o)
         out = np.empty(m.shape[:2] + (kern.N_RL,))
@@ -415,7 +429,29 @@ class MotionModel:
         out[..., kern.RL_ROT:kern.RL_ROT + 9] = state.rot.reshape(-1, 1, 9)
         out[..., kern.RL_FORCE] = (self.normal_forces(state, out[..., :3]) if forces
                                    else 0.0)
+        out[..., kern.RL_SPIN_TORQUE] = state.spin_torque
         return out
+
+    def _store_spin_torques(self, state: ParticleState, roll: np.ndarray,
+                            cfg: MotionConfig) -> None:
+        """`MotionConfig.spin_memory`: each valid particle's pad spin torques at the end of
+        a frictional solve, f'(s) of the kernel's torsional friction at the spin s since
+        the solve's start (`roll`: its frames, the normal forces as the solve left them)."""
+        ok = state.valid
+        rl = roll[ok]
+        r0 = rl[..., kern.RL_ROT:kern.RL_ROT + 9].reshape(rl.shape[:2] + (3, 3))
+        w = np.einsum("pab,pncb->pnac", state.rot[ok], r0)
+        omega = 0.5 * np.stack([w[..., 2, 1] - w[..., 1, 2], w[..., 0, 2] - w[..., 2, 0],
+                                w[..., 1, 0] - w[..., 0, 1]], axis=-1)
+        n = rl[..., kern.RL_NORMAL:kern.RL_NORMAL + 3]
+        spin = (np.sum(n * omega, axis=-1) + (state.theta[ok].sum(axis=-1) - rl[..., kern.RL_PHI])
+                * np.einsum("pna,na->pn", n, self.model.base_rot[:, :, 0]))
+        tau = cfg.spin_friction * rl[..., kern.RL_FORCE]
+        eps = cfg.spin_smoothing
+        t = np.clip(np.divide(rl[..., kern.RL_SPIN_TORQUE], tau, out=np.zeros_like(tau),
+                              where=tau > 0), -kern.SPIN_MEMORY_CLIP, kern.SPIN_MEMORY_CLIP)
+        x = spin + eps * t / np.sqrt(1.0 - t * t)
+        state.spin_torque[ok] = tau * x / np.sqrt(x * x + eps * eps)
 
     def normal_forces(self, state: ParticleState, centres_o: np.ndarray) -> np.ndarray:
         """(P, N) each contact's normal force in the rolling term [N]: k_c times how far the
@@ -530,6 +566,10 @@ class MotionModel:
                 status[state.valid] = step_status[state.valid]
             state.valid &= step_status == kern.OK
             if cfg.rolling:
+                if history and cfg.spin_memory and cfg.spin_friction > 0:
+                    self._store_spin_torques(state, roll, cfg)
+                elif not history:
+                    state.spin_torque[state.valid] = 0.0  # the settle's pads spin freely
                 self.roll(state, before, cfg.slide_friction if history else math.inf)
         return status, iters
 
@@ -580,7 +620,7 @@ class MotionModel:
     def evaluate(self, state: ParticleState, q: int, u: np.ndarray,
                  roll: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
         """Energy [J], gradient (N K + 6,) and dense Hessian of particle q, in the solver's
-        coordinates (theta, dp, dw). `roll`: the (N, 17) rolling frames (`rolling_frames`),
+        coordinates (theta, dp, dw). `roll`: the (N, 18) rolling frames (`rolling_frames`),
         needed with the rolling term. For tests and diagnostics."""
         if roll is None:
             roll = self.rolling_frames(state)[q] if self.config.rolling else self._no_roll[0]
@@ -613,7 +653,7 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
                      theta: np.ndarray, pos: np.ndarray, rot: np.ndarray,
                      roll: np.ndarray | None = None) -> float:
     """Plain NumPy energy of particle q at configuration (theta, pos, rot), term by term
-    (Eq. 6, 7 compliant, 8 penalty or rolling with the (N, 17) frames `roll` and the pads'
+    (Eq. 6, 7 compliant, 8 penalty or rolling with the (N, 18) frames `roll` and the pads'
     friction, limits, gravity). The independent reference the vectorised kernel is tested
     against."""
     m, cfg, obj = motion.model, motion.config, motion.obj
@@ -667,7 +707,10 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
         mu, mu_t = cfg.slide_friction, cfg.spin_friction
         if mu_t > 0:
             eps = cfg.spin_smoothing
-            e += np.sum(mu_t * roll[:, kern.RL_FORCE] * (np.sqrt(spin**2 + eps**2) - eps))
+            tau = mu_t * roll[:, kern.RL_FORCE]
+            s0 = np.array([kern.spin_offset(q0, t0, eps)
+                           for q0, t0 in zip(roll[:, kern.RL_SPIN_TORQUE], tau, strict=True)])
+            e += np.sum(tau * (np.sqrt((spin + s0)**2 + eps**2) - np.sqrt(s0**2 + eps**2)))
         cap = mu * roll[:, kern.RL_FORCE] if math.isfinite(mu) else np.full(len(roll), math.inf)
         z = np.sqrt(t2)
         with np.errstate(invalid="ignore"):

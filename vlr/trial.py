@@ -150,6 +150,8 @@ class TrialSettings:
             spin) in the filter's motion model (`vlr.motion.MotionConfig`). They are the
             pads' material, known like their radius: the sim's are 1.0 and 0.001
             (`sim.pads`).
+        spin_memory: with spin_friction, each particle's pads keep their spin torques from
+            one action to the next (`vlr.motion.MotionConfig.spin_memory`).
         exploration: "random" actions (the paper) or "active" (vlr.active).
         active_model_error: with active exploration, the model's expected error as a
             fraction of each candidate's predicted motion (`ActiveExploration.model_error`).
@@ -203,6 +205,7 @@ class TrialSettings:
     rolling: bool | None = None
     slide_friction: float | None = None
     spin_friction: float = 0.0
+    spin_memory: bool = False
     exploration: str = "random"
     active_model_error: float = 0.0
     active_criterion: str = "spread"
@@ -263,6 +266,9 @@ class TrialSettings:
                             "contacts never slide)")
         if not 0 <= self.spin_friction <= 0.01:
             raise UserError(f"spin_friction {self.spin_friction} m must be in [0, 0.01]")
+        if self.spin_memory and not self.spin_friction:
+            raise UserError("spin_memory keeps the pads' torsional friction torques: set "
+                            "spin_friction too")
         if (self.slide_friction is not None or self.spin_friction) and not self.uses_rolling:
             raise UserError("slide_friction and spin_friction act on rolling contacts: set "
                             "rolling too")
@@ -342,8 +348,9 @@ class TrialSettings:
         if self.jitter_h is not None and not (is_real(self.jitter_h)
                                               and 0 <= self.jitter_h < 1):
             raise bad("jitter_h", "a number in [0, 1) (or none: the filter's default)")
-        if not isinstance(self.link_scaling, bool):
-            raise bad("link_scaling", "true or false")
+        for name in ("link_scaling", "spin_memory"):
+            if not isinstance(getattr(self, name), bool):
+                raise bad(name, "true or false")
         if not isinstance(self.rolling, bool | None):
             raise bad("rolling", "true or false (or none: the backend's default)")
         if self.exploration not in ("random", "active"):
@@ -464,7 +471,8 @@ class TrialSettings:
             cfg = replace(cfg, link_scaling=True)
         return replace(cfg, slide_friction=(math.inf if self.slide_friction is None
                                             else float(self.slide_friction)),
-                       spin_friction=float(self.spin_friction))
+                       spin_friction=float(self.spin_friction),
+                       spin_memory=self.spin_memory)
 
 
 @dataclass

@@ -81,6 +81,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--spin-friction", type=float, default=0.0, metavar="MU_T",
                    help="with rolling contacts: the pads' torsional friction coefficient [m] "
                    "(default 0: free spin; the sim's pads have 0.001)")
+    p.add_argument("--spin-memory", action="store_true",
+                   help="with --spin-friction: each particle's pads keep their spin torques "
+                   "from one action to the next (default: each action starts them at 0)")
     p.add_argument("--exploration", choices=("random", "active"), default="random",
                    help="random actions (the paper) or active: the candidate whose predicted "
                    "POM poses disagree most across the particles")
@@ -192,7 +195,8 @@ def run(args: argparse.Namespace) -> int:
         contact_spread_deg=args.contact_spread_deg, contact_prior=args.contact_prior,
         rolling=args.rolling,
         slide_friction=args.slide_friction,
-        spin_friction=args.spin_friction, exploration=args.exploration,
+        spin_friction=args.spin_friction, spin_memory=args.spin_memory,
+        exploration=args.exploration,
         active_model_error=args.active_model_error,
         active_criterion=args.active_criterion, active_min_force_n=args.active_min_force,
         anneal_stages=args.anneal_stages,
