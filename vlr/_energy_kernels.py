@@ -362,7 +362,7 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                 s0 = spin_offset(rl[i, RL_SPIN_TORQUE], tau, eps)
                 x = s_sp + s0
                 r = math.sqrt(x * x + eps * eps)
-                e += tau * (r - math.sqrt(s0 * s0 + eps * eps))
+                e += tau * (r - (eps if s0 == 0.0 else math.sqrt(s0 * s0 + eps * eps)))
                 f1 += tau * x / r
                 f2 += tau * eps * eps / (r * r * r)
             if spin_on:
