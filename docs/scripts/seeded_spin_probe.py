@@ -1,0 +1,99 @@
+"""Does the sim's stored spin torque explain the restarted orientation gap? (docs/RESULTS.md
+section 5, "The pads' spin memory", session 26.)
+
+A one-off diagnostic, not part of the package. `vlr gap`'s random actions on each object
+(seed SEED). Each action is predicted with the friction rung and spin memory from the truth
+re-settled (glued, as `vlr gap` does), in two arms:
+
+* `zero`: the pads start at zero spin torque (what `vlr gap` can know);
+* `sim`: each pad starts with the spin torque the sim's pad holds at that state (MuJoCo's
+  torsional contact force, which has the model's sign convention: a pad slipping at its
+  cone holds a torque of the sign of its spin, 60 of 63 such contacts on three objects);
+* `loads`, `loads + sim`: no settle; each pad's stretch is the sim's contact force on the
+  object (`true_loads_probe.py`, session 10), the spin torques zero or the sim's.
+
+Both arms first relax at the old command (the command change's first step) and measure the
+action's motion from there, so the seeded torques' own rebalancing is not counted as the
+action's. Sim ground truth: this is scoring, never the estimator.
+
+    MUJOCO_GL=egl python docs/scripts/seeded_spin_probe.py 0
+"""
+
+import math
+import sys
+from dataclasses import replace
+
+import numpy as np
+
+from sim.backend import SimHand
+from sim.gap import OBJECTS, GapSettings, _angle_deg, _state
+from vlr.explore import ExplorationRange, random_action
+from vlr.kinematics import HandModel
+from vlr.motion import MotionModel, ObjectParams
+
+sys.path.insert(0, "docs/scripts")
+from pad_spin_probe import FRICTION, SETTLE, pad_loads  # noqa: E402
+from true_loads_probe import pad_forces  # noqa: E402
+
+MEMORY = replace(FRICTION, spin_memory=True)
+
+
+def record(obj: str, seed: int, actions: int = 30):
+    s = GapSettings(object=obj, seed=seed, actions=actions)
+    with SimHand(object=obj, seed=seed) as hand:
+        commands = [hand.grasp().commands]
+        truths = [hand.scoring_truth()]
+        torques = [[pad_loads(hand).get(sl, (0, 0, 0))[1] * 1e-3 for sl in hand.slots]]
+        forces = [pad_forces(hand)]
+        rng = np.random.default_rng(seed + 1)
+        explore = ExplorationRange(s.action_range[0], s.action_range[1], s.band)
+        for _ in range(actions):
+            r = hand.apply(random_action(rng, commands[-1], commands[0], explore))
+            if not r.grasp_held:
+                break
+            commands.append(r.commands)
+            truths.append(hand.scoring_truth())
+            torques.append([pad_loads(hand).get(sl, (0, 0, 0))[1] * 1e-3 for sl in hand.slots])
+            forces.append(pad_forces(hand))
+        return (hand.true_spec, hand.object_spec, commands, truths, np.array(torques),
+                np.array(forces))
+
+
+ARMS = ("zero", "sim", "loads", "loads + sim")
+
+
+def ratios(spec, obj_spec, commands, truths, torques, forces, arm: str) -> list[float]:
+    model = HandModel.from_spec(spec)
+    mm = MotionModel(model, ObjectParams.from_spec(obj_spec), MEMORY)
+    out = []
+    for k in range(len(commands) - 1):
+        t0, t1 = truths[k], truths[k + 1]
+        st = _state(model, t0)
+        if arm.startswith("loads"):  # the stretch times k_c is minus the force on the object
+            st.anchor_to_pose(model, (-forces[k] / MEMORY.contact_stiffness)[None])
+        else:
+            mm.solve(st, commands[k], SETTLE)
+        if arm.endswith("sim"):
+            st.spin_torque[0] = torques[k]
+        mm.solve(st, commands[k], u_from=commands[k])  # relax at the old command
+        r0 = st.rot[0].copy()
+        mm.solve(st, commands[k + 1], u_from=commands[k])
+        if not st.valid[0]:
+            continue
+        true_turn = _angle_deg(t1.rotation @ t0.rotation.T)
+        err = _angle_deg((st.rot[0] @ r0.T) @ (t1.rotation @ t0.rotation.T).T)
+        out.append(err / true_turn if true_turn > 0 else math.nan)
+    return out
+
+
+def main(seed: int) -> None:
+    for obj in OBJECTS:
+        rec = record(obj, seed)
+        r = {arm: ratios(*rec, arm=arm) for arm in ARMS}
+        print(f"{obj:17s} seed {seed}: orientation ratio mean (median; solves) "
+              + ", ".join(f"{arm} {np.nanmean(v):.3f} ({np.nanmedian(v):.3f}; {len(v)})"
+                          for arm, v in r.items()), flush=True)
+
+
+if __name__ == "__main__":
+    main(int(sys.argv[1]) if len(sys.argv) > 1 else 0)
