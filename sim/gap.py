@@ -110,6 +110,9 @@ class GapSettings:
         if not (np.isfinite(self.spin_friction) and 0 <= self.spin_friction <= 0.01):
             raise UserError(f"spin friction {self.spin_friction!r} m must be in [0, 0.01] "
                             "(a torsional friction coefficient, about a pad's contact radius)")
+        if self.spin_memory and not self.spin_friction:
+            raise UserError("spin memory keeps the pads' torsional friction torques: it needs a "
+                            "spin friction > 0")
         if not isinstance(self.rolling_substeps, int) or self.rolling_substeps < 1:
             raise UserError(f"rolling substeps {self.rolling_substeps!r} must be an integer "
                             ">= 1")
