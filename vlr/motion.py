@@ -439,13 +439,7 @@ class MotionModel:
         the solve's start (`roll`: its frames, the normal forces as the solve left them)."""
         ok = state.valid
         rl = roll[ok]
-        r0 = rl[..., kern.RL_ROT:kern.RL_ROT + 9].reshape(rl.shape[:2] + (3, 3))
-        w = np.einsum("pab,pncb->pnac", state.rot[ok], r0)
-        omega = 0.5 * np.stack([w[..., 2, 1] - w[..., 1, 2], w[..., 0, 2] - w[..., 2, 0],
-                                w[..., 1, 0] - w[..., 0, 1]], axis=-1)
-        n = rl[..., kern.RL_NORMAL:kern.RL_NORMAL + 3]
-        spin = (np.sum(n * omega, axis=-1) + (state.theta[ok].sum(axis=-1) - rl[..., kern.RL_PHI])
-                * np.einsum("pna,na->pn", n, self.model.base_rot[:, :, 0]))
+        spin = pad_spins(self.model, rl, state.theta[ok], state.rot[ok])
         tau = cfg.spin_friction * rl[..., kern.RL_FORCE]
         eps = cfg.spin_smoothing
         t = np.clip(np.divide(rl[..., kern.RL_SPIN_TORQUE], tau, out=np.zeros_like(tau),
@@ -649,6 +643,20 @@ class MotionModel:
         return state.tendon * np.maximum(0.0, np.asarray(u) - s)
 
 
+def pad_spins(model: HandModel, roll: np.ndarray, theta: np.ndarray,
+              rot: np.ndarray) -> np.ndarray:
+    """(P, N) each pad's spin against the object about the contact normal since the rolling
+    frames `roll` (P, N, 18) were taken [rad]: s = n . (omega_O - omega_D), omega_O =
+    vee(sym(R R0^T)), omega_D = -(sum theta - sum theta_0) x_F (the kernel's `_spin_rate`)."""
+    r0 = roll[..., kern.RL_ROT:kern.RL_ROT + 9].reshape(roll.shape[:2] + (3, 3))
+    w = np.einsum("pab,pncb->pnac", rot, r0)
+    omega = 0.5 * np.stack([w[..., 2, 1] - w[..., 1, 2], w[..., 0, 2] - w[..., 2, 0],
+                            w[..., 1, 0] - w[..., 0, 1]], axis=-1)
+    n = roll[..., kern.RL_NORMAL:kern.RL_NORMAL + 3]
+    return (np.sum(n * omega, axis=-1) + (theta.sum(axis=-1) - roll[..., kern.RL_PHI])
+            * np.einsum("pna,na->pn", n, model.base_rot[:, :, 0]))
+
+
 def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.ndarray,
                      theta: np.ndarray, pos: np.ndarray, rot: np.ndarray,
                      roll: np.ndarray | None = None) -> float:
@@ -698,10 +706,7 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
         e += 0.5 * kc * np.sum(gap**2)
         spin = np.zeros(len(roll))
         if cfg.spin_stiffness > 0 or cfg.spin_friction > 0:
-            w = rot @ roll[0, 7:16].reshape(3, 3).T
-            omega = 0.5 * np.array([w[2, 1] - w[1, 2], w[0, 2] - w[2, 0], w[1, 0] - w[0, 1]])
-            spin = n @ omega + (theta.sum(axis=-1) - roll[:, 6]) * np.einsum(
-                "na,na->n", n, m.base_rot[:, :, 0])
+            spin = pad_spins(m, roll[None], theta[None], rot[None])[0]
         e += 0.5 * cfg.spin_stiffness * np.sum(spin**2)
         t2 = np.sum(tangential**2, axis=-1)
         mu, mu_t = cfg.slide_friction, cfg.spin_friction
