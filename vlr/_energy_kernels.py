@@ -31,8 +31,9 @@ OK, NONFINITE, NO_CONVERGENCE, JUMP, INACTIVE = 0, 1, 2, 3, 4
 N_PRM = 14
 # Layout of a rolling frame (one per contact): local centre of curvature in O (3), contact
 # normal in the palm frame (3), the finger's summed joint angles (1), the object rotation
-# R_PO (9, row-major) at the start of the solve, and the contact's normal force then (1) [N]
-# (it sets the friction's limits).
+# R_PO (9, row-major) at the start of the solve, the contact's normal force then (1) [N]
+# (it sets the friction's limits) and the spin torque the pad holds (1) [N m]
+# (`MotionConfig.spin_memory`).
 RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, RL_FORCE, RL_SPIN_TORQUE, N_RL = 0, 3, 6, 7, 16, 17, 18
 # A stored spin torque's share of its cone is held below this (`spin_offset`).
 SPIN_MEMORY_CLIP = 0.99
