@@ -70,11 +70,16 @@ def spin_roll(model: HandModel, theta0, rot0, theta1, rot1, normals1) -> np.ndar
     return np.array(out)
 
 
-def main(obj: str = "apple", seed: int = 0, actions: int = 30) -> None:
+def record(obj: str, seed: int, actions: int = 30):
+    """`vlr gap`'s random actions in the sim: the hand's and the object's specs, the finger
+    slots, the commands, the true state after each, and the sim's pad loads (`pad_loads`)
+    and pad forces on the object (`true_loads_probe.pad_forces`) with it."""
+    from true_loads_probe import pad_forces
+
     s = GapSettings(object=obj, seed=seed, actions=actions)
     with SimHand(object=obj, seed=seed) as hand:
         commands = [hand.grasp().commands]
-        truths, loads = [hand.scoring_truth()], [pad_loads(hand)]
+        truths, loads, forces = [hand.scoring_truth()], [pad_loads(hand)], [pad_forces(hand)]
         rng = np.random.default_rng(seed + 1)
         explore = ExplorationRange(s.action_range[0], s.action_range[1], s.band)
         for _ in range(actions):
@@ -84,8 +89,13 @@ def main(obj: str = "apple", seed: int = 0, actions: int = 30) -> None:
             commands.append(r.commands)
             truths.append(hand.scoring_truth())
             loads.append(pad_loads(hand))
-        slots = hand.slots
-        true_spec, obj_spec = hand.true_spec, hand.object_spec
+            forces.append(pad_forces(hand))
+        return (hand.true_spec, hand.object_spec, hand.slots, commands, truths, loads,
+                np.array(forces))
+
+
+def main(obj: str = "apple", seed: int = 0, actions: int = 30) -> None:
+    true_spec, obj_spec, slots, commands, truths, loads, _ = record(obj, seed, actions)
     model = HandModel.from_spec(true_spec)
     mm = MotionModel(model, ObjectParams.from_spec(obj_spec), FRICTION)
     print(f"{obj}, seed {seed}; per finger: spin sim/model, roll sim/model [deg]; sim N [N], "

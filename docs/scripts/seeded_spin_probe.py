@@ -25,38 +25,24 @@ from dataclasses import replace
 
 import numpy as np
 
-from sim.backend import SimHand
-from sim.gap import OBJECTS, GapSettings, _angle_deg, _state
-from vlr.explore import ExplorationRange, random_action
+from sim.gap import OBJECTS, _angle_deg, _state
 from vlr.kinematics import HandModel
 from vlr.motion import MotionModel, ObjectParams
 
 sys.path.insert(0, "docs/scripts")
-from pad_spin_probe import FRICTION, SETTLE, pad_loads  # noqa: E402
-from true_loads_probe import pad_forces  # noqa: E402
+import pad_spin_probe  # noqa: E402
+from pad_spin_probe import FRICTION, SETTLE  # noqa: E402
 
 MEMORY = replace(FRICTION, spin_memory=True)
 
 
 def record(obj: str, seed: int, actions: int = 30):
-    s = GapSettings(object=obj, seed=seed, actions=actions)
-    with SimHand(object=obj, seed=seed) as hand:
-        commands = [hand.grasp().commands]
-        truths = [hand.scoring_truth()]
-        torques = [[pad_loads(hand).get(sl, (0, 0, 0))[1] * 1e-3 for sl in hand.slots]]
-        forces = [pad_forces(hand)]
-        rng = np.random.default_rng(seed + 1)
-        explore = ExplorationRange(s.action_range[0], s.action_range[1], s.band)
-        for _ in range(actions):
-            r = hand.apply(random_action(rng, commands[-1], commands[0], explore))
-            if not r.grasp_held:
-                break
-            commands.append(r.commands)
-            truths.append(hand.scoring_truth())
-            torques.append([pad_loads(hand).get(sl, (0, 0, 0))[1] * 1e-3 for sl in hand.slots])
-            forces.append(pad_forces(hand))
-        return (hand.true_spec, hand.object_spec, commands, truths, np.array(torques),
-                np.array(forces))
+    """`pad_spin_probe.record`, the spin torques [N m] per state and finger taken out."""
+    spec, obj_spec, slots, commands, truths, loads, forces = pad_spin_probe.record(
+        obj, seed, actions)
+    torques = np.array([[lo.get(sl, (0.0, 0.0, 0.0))[1] * 1e-3 for sl in slots]
+                        for lo in loads])
+    return spec, obj_spec, commands, truths, torques, forces
 
 
 ARMS = ("zero", "sim", "loads", "loads + sim")
