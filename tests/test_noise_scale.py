@@ -5,6 +5,7 @@ tolerance would be free), s = 1 changes nothing, the spec and its prior are chec
 the synthetic world, whose observation noise is half the likelihood's scales, the filter
 identifies a factor below 1 and scores nothing against it (it has no true value)."""
 
+import math
 import types
 
 import numpy as np
@@ -115,6 +116,8 @@ def test_a_trials_noise_prior_reaches_the_filter_and_bad_ones_are_named():
     assert s.to_dict()["noise_prior"] == [0.5, 1.0]
     with pytest.raises(UserError, match="noise_prior"):
         TrialSettings(backend="synthetic", unknowns=["noise"], noise_prior=[0.0, 1.0])
+    with pytest.raises(UserError, match="noise_prior"):
+        TrialSettings(backend="synthetic", unknowns=["noise"], noise_prior=[0.5, math.inf])
     with pytest.raises(UserError, match="add it to unknowns"):
         TrialSettings(backend="synthetic", noise_prior=[0.5, 1.0])
 

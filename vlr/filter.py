@@ -15,6 +15,7 @@ sampled (METHOD.md 3).
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field, replace
 
@@ -82,8 +83,9 @@ def parse_unknown(spec: str, model: HandModel,
         if rest:
             raise ValueError(f"unknown parameter spec {spec!r}: 'noise' takes no finger")
         lo, hi = prior or NOISE_PRIOR
-        if not 0 < lo <= hi:
-            raise ValueError(f"noise prior ({lo}, {hi}) must satisfy 0 < low <= high")
+        if not 0 < lo <= hi < math.inf:
+            raise ValueError(f"noise prior ({lo}, {hi}) must satisfy 0 < low <= high, "
+                             "both finite")
         return Unknown(spec, kind, -1, -1, (float(lo), float(hi)))
     if kind == "tendon":
         finger = model.finger_index(rest) if rest else -1

@@ -340,8 +340,8 @@ class TrialSettings:
         if self.noise_prior is not None:
             if (not isinstance(self.noise_prior, list | tuple) or len(self.noise_prior) != 2
                     or not all(is_real(v) for v in self.noise_prior)
-                    or not 0 < self.noise_prior[0] <= self.noise_prior[1]):
-                raise bad("noise_prior", "[low, high] with 0 < low <= high")
+                    or not 0 < self.noise_prior[0] <= self.noise_prior[1] < math.inf):
+                raise bad("noise_prior", "[low, high] with 0 < low <= high, both finite")
             if "noise" not in self.unknowns:
                 raise bad("noise_prior", "a prior of the 'noise' unknown: add it to unknowns")
             object.__setattr__(self, "noise_prior", tuple(float(v) for v in self.noise_prior))

@@ -54,4 +54,6 @@ def main(out: str) -> None:
 
 
 if __name__ == "__main__":
+    if len(sys.argv) != 2:
+        sys.exit("usage: python docs/scripts/spin_memory_gap.py OUT.csv")
     main(sys.argv[1])
