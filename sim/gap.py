@@ -79,6 +79,8 @@ class GapSettings:
         spin_memory: in the friction rung, each pad keeps its spin torque from one command
             change to the next (`MotionConfig.spin_memory`): along the open-loop path; the
             per-action gap restarts from a settle, which holds none.
+        exact_cylinder: in the rolling rungs, a pad on a cylinder's side is held to the
+            cylinder's axis, not to a sphere of its radius (`MotionConfig.exact_cylinder`).
     """
 
     object: str = "apple"
@@ -94,6 +96,7 @@ class GapSettings:
     spin_friction: float = TORSION_FRICTION
     contact_stiffness: float = MotionConfig.contact_stiffness
     spin_memory: bool = False
+    exact_cylinder: bool = False
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.contact_stiffness) and self.contact_stiffness > 0):
@@ -243,7 +246,8 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
     thumb = model.finger_index("thumb") if "thumb" in model.names else None
     cfg = MotionConfig(terms=terms, rolling_substeps=settings.rolling_substeps,
                        spin_stiffness=settings.spin_stiffness,
-                       contact_stiffness=settings.contact_stiffness)
+                       contact_stiffness=settings.contact_stiffness,
+                       exact_cylinder=settings.exact_cylinder)
     if friction == "friction":
         cfg = replace(cfg, slide_friction=settings.slide_friction,
                       spin_friction=settings.spin_friction,
@@ -372,6 +376,7 @@ def gap_report(settings: GapSettings,
         "slide_friction": settings.slide_friction,
         "spin_friction": settings.spin_friction,
         "spin_memory": settings.spin_memory,
+        "exact_cylinder": settings.exact_cylinder,
         "contact_stiffness": settings.contact_stiffness,
         "true_motion": {"position_mm_mean": float(np.mean(true_p)),
                         "orientation_deg_mean": float(np.mean(true_r))},
@@ -456,6 +461,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="in the friction rung, each pad keeps its spin torque from one "
                    "action to the next (MotionConfig.spin_memory; shows along the open-loop "
                    "path)")
+    p.add_argument("--exact-cylinder", action="store_true",
+                   help="in the rolling rungs, a pad on a cylinder is held to its axis, not "
+                   "to a sphere of its radius (MotionConfig.exact_cylinder)")
     p.add_argument("--json", help="write the report (per object, per model rung) as JSON")
     p.set_defaults(func=run)
 
@@ -480,7 +488,8 @@ def run(args: argparse.Namespace) -> int:
                                slide_friction=args.slide_friction,
                                spin_friction=args.spin_friction,
                                contact_stiffness=args.contact_stiffness,
-                               spin_memory=args.spin_memory)
+                               spin_memory=args.spin_memory,
+                               exact_cylinder=args.exact_cylinder)
         rep = gap_report(settings)
         print(format_report(rep) + "\n", flush=True)
         reports.append(rep)

@@ -93,14 +93,22 @@ def test_gradient_and_hessian_match_reference(modelo):
     check_derivatives(mm, st, u0)
 
 
-@pytest.mark.parametrize("surface", [LocalSurface("sphere", 0.04), LocalSurface("plane")])
-def test_rolling_gradient_and_hessian_match_reference(modelo, surface):
-    """The rolling term (pad sphere on the object's local sphere, no tangential slip of the
-    previous contacts) against finite differences of its NumPy reference."""
+@pytest.mark.parametrize("surface, exact", [
+    (LocalSurface("sphere", 0.04), False), (LocalSurface("plane"), False),
+    # The cylinder held to its axis; along z one contact of the test grasp is on an end face.
+    (LocalSurface("cylinder", 0.016, (1.0, 0.0, 0.0)), True),
+    (LocalSurface("cylinder", 0.016, (0.0, 0.0, 1.0)), True),
+    (LocalSurface("cylinder", 0.016, (0.6, 0.8, 0.0)), True)])
+def test_rolling_gradient_and_hessian_match_reference(modelo, surface, exact):
+    """The rolling term (pad sphere on the object's local sphere or cylinder, no tangential
+    slip of the previous contacts) against finite differences of its NumPy reference; for the
+    cylinder that includes the Hessian terms of its axis turning with the object."""
     obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=surface)
     _, st, u0 = grasp(modelo)
-    mm = MotionModel(modelo, obj, ROLL)
+    mm = MotionModel(modelo, obj, replace(ROLL, exact_cylinder=exact))
     roll = mm.rolling_frames(st)[0]
+    assert np.count_nonzero(roll[:, kern.RL_AXIS:].any(axis=1)) == (
+        0 if not exact else 2 if surface.axis[2] else 3)
     shake(st, 3, 0.02, 0.02, 2e-4)
     check_derivatives(mm, st, u0, roll, e_rel=1e-10, hess_atol=2e-6)
 
@@ -242,7 +250,7 @@ def _cone_load(mm: MotionModel, st: ParticleState) -> np.ndarray:
     d = c - st.anchors
     t = np.linalg.norm(d - np.sum(d * m, axis=-1, keepdims=True) * m, axis=-1)
     roll = mm.rolling_frames(st, m)
-    n = mm.normal_forces(st, roll[..., :3])
+    n = mm.normal_forces(st, roll)
     return mm.config.contact_stiffness * t / (mm.config.slide_friction * np.maximum(n, 1e-12))
 
 
@@ -334,7 +342,7 @@ def test_spin_memory_makes_the_frictional_state_a_fixed_point(modelo):
         s = st.copy()
         assert np.all(mm.solve(s, u1, u_from=u0)[0] == 0)
         if memory:
-            cone = FRICTION.spin_friction * mm.normal_forces(s, mm.rolling_frames(s)[..., :3])
+            cone = FRICTION.spin_friction * mm.normal_forces(s, mm.rolling_frames(s))
             assert np.abs(s.spin_torque).max() > 1e-5  # the pads hold torques
             assert np.all(np.abs(s.spin_torque) <= cone + 1e-12)
         else:

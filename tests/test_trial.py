@@ -96,6 +96,10 @@ def test_pad_friction_reaches_the_filter_and_needs_rolling():
     with pytest.raises(UserError, match="spin_memory 'yes'"):
         TrialSettings(rolling=True, spin_friction=0.001, spin_memory="yes")
     assert math.isinf(TrialSettings(rolling=True).motion_config().slide_friction)
+    assert TrialSettings(rolling=True, exact_cylinder=True).motion_config().exact_cylinder
+    assert not TrialSettings(rolling=True).motion_config().exact_cylinder
+    with pytest.raises(UserError, match="exact_cylinder 1"):
+        TrialSettings(rolling=True, exact_cylinder=1)
     with pytest.raises(UserError, match="set rolling too"):
         TrialSettings(backend="synthetic", slide_friction=1.0)
     with pytest.raises(UserError, match="set rolling too"):

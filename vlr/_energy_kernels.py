@@ -33,8 +33,11 @@ N_PRM = 14
 # normal in the palm frame (3), the finger's summed joint angles (1), the object rotation
 # R_PO (9, row-major) at the start of the solve, the contact's normal force then (1) [N]
 # (it sets the friction's limits) and the spin torque the pad holds (1) [N m]
-# (`MotionConfig.spin_memory`).
-RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, RL_FORCE, RL_SPIN_TORQUE, N_RL = 0, 3, 6, 7, 16, 17, 18
+# (`MotionConfig.spin_memory`), and for a contact on a cylinder's side the cylinder's axis in
+# O (3; zero elsewhere: the local surface is then the sphere about the centre;
+# `MotionConfig.exact_cylinder`).
+(RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, RL_FORCE, RL_SPIN_TORQUE, RL_AXIS,
+ N_RL) = 0, 3, 6, 7, 16, 17, 18, 21
 # A stored spin torque's share of its cone is held below this (`spin_offset`).
 SPIN_MEMORY_CLIP = 0.99
 
@@ -71,6 +74,50 @@ def _separation(bp, rb, fx, fy, fz, p, R, ox, oy, oz):
             - p[1] - (R[1, 0] * ox + R[1, 1] * oy + R[1, 2] * oz),
             bp[2] + rb[2, 0] * fx + rb[2, 1] * fy + rb[2, 2] * fz
             - p[2] - (R[2, 0] * ox + R[2, 1] * oy + R[2, 2] * oz))
+
+
+@njit(cache=True)
+def _to_axis(d0, d1, d2, R, rl, i):
+    """The separation (d0, d1, d2) from contact i's local centre to a point, made relative
+    to the nearest point of the local axis when the contact has one (rl[i, RL_AXIS:], a
+    cylinder's side): returns the separation from that nearest point, the palm-frame axis u
+    and t, how far the nearest point lies along the axis from the centre. Without an axis,
+    u = 0 and t = 0 (a sphere)."""
+    a0, a1, a2 = rl[i, RL_AXIS], rl[i, RL_AXIS + 1], rl[i, RL_AXIS + 2]
+    if a0 == 0.0 and a1 == 0.0 and a2 == 0.0:
+        return d0, d1, d2, 0.0, 0.0, 0.0, 0.0
+    u0 = R[0, 0] * a0 + R[0, 1] * a1 + R[0, 2] * a2
+    u1 = R[1, 0] * a0 + R[1, 1] * a1 + R[1, 2] * a2
+    u2 = R[2, 0] * a0 + R[2, 1] * a1 + R[2, 2] * a2
+    t = d0 * u0 + d1 * u1 + d2 * u2
+    return d0 - t * u0, d1 - t * u1, d2 - t * u2, u0, u1, u2, t
+
+
+@njit(cache=True)
+def _axis_curvature(i, k_n, nf, dist, dv, u, a, R, jac, M, B, C):
+    """The Hessian terms a cylinder's axis adds to the pad-to-axis penalty: its direction
+    u = R a turns with the object. nf = k_c g (the penalty's force along dv); jac and M as
+    `_pair` left them for the pad centre and the axis point nearest it (where the
+    separation is normal to u). With U_b = R (e_b x a) and k_b = dv . U_b:
+    w-w: -nf (dist k_b k_c + (M_b . u) k_c + (M_c . u) k_b); theta_j-w_c: -nf (J_j . u) k_c;
+    p_b-w_c: nf u_b k_c (second derivatives of 1/2 k_c (|P_u v| - reach)^2)."""
+    # k_b = dv . R (e_b x a)
+    w0 = dv[0] * R[0, 0] + dv[1] * R[1, 0] + dv[2] * R[2, 0]    # R^T dv
+    w1 = dv[0] * R[0, 1] + dv[1] * R[1, 1] + dv[2] * R[2, 1]
+    w2 = dv[0] * R[0, 2] + dv[1] * R[1, 2] + dv[2] * R[2, 2]
+    k = (w2 * a[1] - w1 * a[2], w0 * a[2] - w2 * a[0], w1 * a[0] - w0 * a[1])
+    mu = (M[0, 0] * u[0] + M[1, 0] * u[1] + M[2, 0] * u[2],
+          M[0, 1] * u[0] + M[1, 1] * u[1] + M[2, 1] * u[2],
+          M[0, 2] * u[0] + M[1, 2] * u[1] + M[2, 2] * u[2])
+    for b in range(3):
+        for c in range(3):
+            C[3 + b, 3 + c] -= nf * (dist * k[b] * k[c] + mu[b] * k[c] + mu[c] * k[b])
+            C[b, 3 + c] += nf * u[b] * k[c]
+            C[3 + c, b] += nf * u[b] * k[c]
+    for j in range(k_n):
+        ju = jac[j, 0] * u[0] + jac[j, 1] * u[1] + jac[j, 2] * u[2]
+        for c in range(3):
+            B[i, j, 3 + c] -= nf * ju * k[c]
 
 
 @njit(cache=True)
@@ -374,14 +421,21 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                 f2 += ks
             _pair(i, k_n, cfx, cfy, cfz, ax, ay, az, gam, G, 0.0, rb, R, qy, qz, jac, M,
                   vk[2], vk[0], gA, A, B, gC, C)
-            # Pad centre (fixed in D) to the local centre of curvature (fixed in O).
+            # Pad centre (fixed in D) to the local centre of curvature (fixed in O), or to
+            # the local axis of a cylinder (measured from its point nearest the pad centre,
+            # where the first derivatives of the axis's turn vanish).
             s_last, c_last = sphi[k_n - 1], cphi[k_n - 1]
             pcz = seg[i, k_n - 1]
             px = pad_xy[i, 0]
             py = qy[k_n - 1] + pad_xy[i, 1] * c_last + pcz * s_last
             pz = qz[k_n - 1] - pad_xy[i, 1] * s_last + pcz * c_last
-            ox, oy, oz = rl[i, 0], rl[i, 1], rl[i, 2]
-            d0, d1, d2 = _separation(base_pos[i], rb, px, py, pz, p, R, ox, oy, oz)
+            d0, d1, d2 = _separation(base_pos[i], rb, px, py, pz, p, R,
+                                     rl[i, 0], rl[i, 1], rl[i, 2])
+            d0, d1, d2, u0, u1, u2, t_ax = _to_axis(d0, d1, d2, R, rl, i)
+            ox = rl[i, 0] + t_ax * rl[i, RL_AXIS]
+            oy = rl[i, 1] + t_ax * rl[i, RL_AXIS + 1]
+            oz = rl[i, 2] + t_ax * rl[i, RL_AXIS + 2]
+            uv = (u0, u1, u2)
             dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
             reach = prm[P_RHO] + pad_r[i]
             g = dist - reach
@@ -391,10 +445,13 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
             for a in range(3):
                 gam[a] = kc * g * dv[a]
                 for b in range(3):
-                    G[a, b] = kc * (sc * (1.0 if a == b else 0.0)
+                    G[a, b] = kc * (sc * ((1.0 if a == b else 0.0) - uv[a] * uv[b])
                                     + (reach / dist) * dv[a] * dv[b])
             _pair(i, k_n, px, py, pz, ox, oy, oz, gam, G, 0.0, rb, R, qy, qz, jac, M,
                   vk[2], vk[0], gA, A, B, gC, C)
+            if u0 != 0.0 or u1 != 0.0 or u2 != 0.0:
+                _axis_curvature(i, k_n, kc * g, dist, dv, uv, rl[i, RL_AXIS:RL_AXIS + 3],
+                                R, jac, M, B, C)
             if spin_on:
                 _spin_apply(i, k_n, f1, f2, cxs, j0, j1, j2, gA, A, B, gC, C)
         # Eq. 8 as a stiff penalty: the contact (fixed in D) stays at its anchor (fixed in O).
@@ -440,7 +497,8 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
 def _normal_force(i, th, seg, nrm, rl, p, R, base_pos, base_rot, pad_xy, pad_r, prm,
                   sphi, cphi, qy, qz):
     """Contact i's normal force in the rolling term at the current configuration [N]: k_c
-    times how far finger i's pad sphere sinks into the object's local sphere (rl[i, :3])."""
+    times how far finger i's pad sphere sinks into the object's local sphere (rl[i, :3]),
+    or its local cylinder (`_to_axis`)."""
     k_n = th.shape[1]
     _finger_chain(th[i], seg[i], nrm[i], pad_xy[i, 0], pad_xy[i, 1], pad_r[i], sphi, cphi,
                   qy, qz)
@@ -450,6 +508,7 @@ def _normal_force(i, th, seg, nrm, rl, p, R, base_pos, base_rot, pad_xy, pad_r, 
     pz = qz[k_n - 1] - pad_xy[i, 1] * s_last + pcz * c_last
     d0, d1, d2 = _separation(base_pos[i], base_rot[i], pad_xy[i, 0], py, pz, p, R,
                              rl[i, 0], rl[i, 1], rl[i, 2])
+    d0, d1, d2 = _to_axis(d0, d1, d2, R, rl, i)[:3]
     g = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - (prm[P_RHO] + pad_r[i])
     return prm[P_KC] * max(0.0, -g)
 

@@ -198,4 +198,4 @@ def _normal_forces(pf, st) -> np.ndarray:
     from vlr.surface import surface_normals
 
     m = surface_normals(pf.model, st.theta, st.normals, st.rot)
-    return pf.motion.normal_forces(st, pf.motion.rolling_frames(st, m)[..., :3])
+    return pf.motion.normal_forces(st, pf.motion.rolling_frames(st, m))

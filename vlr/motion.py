@@ -40,7 +40,7 @@ import numpy as np
 from vlr import _energy_kernels as kern
 from vlr.kinematics import HandModel, contact_in_distal, contact_points, plane_rotation
 from vlr.spec import ObjectSpec
-from vlr.surface import LocalSurface, roll_contacts, surface_normals
+from vlr.surface import LocalSurface, local_centres, pad_gaps, roll_contacts, surface_normals
 
 __all__ = [
     "TERMS",
@@ -132,6 +132,11 @@ class MotionConfig:
             change starts each pad at zero spin torque, so a particle's first step at the
             old command rebalances the torques it dropped. A settle spins the pads freely
             and zeroes them either way.
+        exact_cylinder: with rolling, a pad on a cylinder's side is held at rho + r from
+            the cylinder's local axis, as it is; False: from the centre of a sphere of the
+            cylinder's radius, exact across the axis and too curved along it (with a 12 mm
+            pad on the screwdriver's 16 mm handle a roll along the axis would turn the
+            object 1.75 times too far). Spheres and planes are the same either way.
         spin_smoothing: the spin [rad] over which the friction's |s| is rounded off
             (Newton needs a smooth energy); the stick's compliance is tau_max over it.
         follow_substeps: a particle whose solve of a command change (`solve(...,
@@ -156,6 +161,7 @@ class MotionConfig:
     slide_friction: float = math.inf
     spin_friction: float = 0.0
     spin_memory: bool = False
+    exact_cylinder: bool = False
     cone_return: float = math.inf
     spin_smoothing: float = 1e-3
     follow_substeps: int = 16
@@ -411,9 +417,11 @@ class MotionModel:
         return prm
 
     def rolling_frames(self, state: ParticleState, normals_o: np.ndarray | None = None,
-                       forces: bool = True) -> np.ndarray:
-        """(P, N, 18) what the rolling term holds fixed during a solve: each contact's local
-        centre of curvature in O, a - rho m, its normal in the palm frame, R m (m: the
+                       forces: bool = True, exact_cylinder: bool | None = None) -> np.ndarray:
+        """(P, N, 21) what the rolling term holds fixed during a solve: each contact's local
+        centre of curvature in O, a - rho m (and a cylinder's axis with `exact_cylinder`,
+        by default the model's `MotionConfig.exact_cylinder`; `vlr.surface.local_centres`),
+        its normal in the palm frame, R m (m: the
         object's outward normal at the contact, in O), the finger's summed joint angles, the
         object's rotation (for the spin term), the contact's normal force
         (`normal_forces`; it sets the friction's limits; 0 if not `forces`) and the spin
@@ -422,13 +430,14 @@ class MotionModel:
         m = (surface_normals(self.model, state.theta, state.normals, state.rot)
              if normals_o is None else normals_o)
         out = np.empty(m.shape[:2] + (kern.N_RL,))
-        out[..., kern.RL_CENTRE:kern.RL_CENTRE + 3] = (
-            state.anchors - self.obj.surface.kernel_radius * m)
+        (out[..., kern.RL_CENTRE:kern.RL_CENTRE + 3],
+         out[..., kern.RL_AXIS:kern.RL_AXIS + 3]) = local_centres(
+            self.obj.surface, state.anchors, m,
+            self.config.exact_cylinder if exact_cylinder is None else exact_cylinder)
         out[..., kern.RL_NORMAL:kern.RL_NORMAL + 3] = np.einsum("pab,pnb->pna", state.rot, m)
         out[..., kern.RL_PHI] = state.theta.sum(axis=-1)
         out[..., kern.RL_ROT:kern.RL_ROT + 9] = state.rot.reshape(-1, 1, 9)
-        out[..., kern.RL_FORCE] = (self.normal_forces(state, out[..., :3]) if forces
-                                   else 0.0)
+        out[..., kern.RL_FORCE] = self.normal_forces(state, out) if forces else 0.0
         out[..., kern.RL_SPIN_TORQUE] = state.spin_torque
         return out
 
@@ -447,15 +456,17 @@ class MotionModel:
         x = spin + eps * t / np.sqrt(1.0 - t * t)
         state.spin_torque[ok] = tau * x / np.sqrt(x * x + eps * eps)
 
-    def normal_forces(self, state: ParticleState, centres_o: np.ndarray) -> np.ndarray:
+    def normal_forces(self, state: ParticleState, frames: np.ndarray) -> np.ndarray:
         """(P, N) each contact's normal force in the rolling term [N]: k_c times how far the
-        pad sphere sinks into the object's local sphere (centres `centres_o` in O, radius
-        rho), 0 where they part."""
+        pad sphere sinks into the object's local sphere or cylinder (the rolling `frames`'
+        centres and axes in O, radius rho), 0 where they part."""
         centre = contact_points(self.model, state.theta, np.zeros_like(state.normals),
                                 state.segments)
-        local = state.pos[:, None, :] + np.einsum("pab,pnb->pna", state.rot, centres_o)
-        gap = (np.linalg.norm(centre - local, axis=-1)
-               - (self.obj.surface.kernel_radius + self.model.pad_radius))
+        local = state.pos[:, None, :] + np.einsum(
+            "pab,pnb->pna", state.rot, frames[..., kern.RL_CENTRE:kern.RL_CENTRE + 3])
+        axes = np.einsum("pab,pnb->pna", state.rot, frames[..., kern.RL_AXIS:kern.RL_AXIS + 3])
+        gap = pad_gaps(centre, local, axes,
+                       self.obj.surface.kernel_radius + self.model.pad_radius)
         return self.config.contact_stiffness * np.maximum(0.0, -gap)
 
     def _shared_for(self, cfg: MotionConfig) -> tuple:
@@ -507,7 +518,7 @@ class MotionModel:
         if not state.valid.any():
             return
         self.roll(state, surface_normals(self.model, state.theta, state.normals, state.rot),
-                  cfg.cone_return)
+                  cfg.cone_return, cfg.exact_cylinder)
         was = state.valid.copy()
         st2, it2 = self._solve(state, u, cfg, custom, None)
         iters += it2
@@ -538,14 +549,16 @@ class MotionModel:
             # can be a large move (measured: a joint 11 degrees, 170 iterations), after a
             # frictional solve it takes one or two iterations.
             self.roll(state, surface_normals(self.model, state.theta, state.normals,
-                                             state.rot), cfg.slide_friction)
+                                             state.rot), cfg.slide_friction,
+                      cfg.exact_cylinder)
             targets = [np.ascontiguousarray(u_from, dtype=float)] + targets
             budgets = [RELAX_ITERATIONS * int(cfg.max_iter)] + budgets
         for j, target in enumerate(targets):
             before = surface_normals(self.model, state.theta, state.normals, state.rot) \
                 if cfg.rolling else None
             # Only friction reads the normal forces (a settle has none).
-            roll = (self.rolling_frames(state, before, forces=history and cfg.friction)
+            roll = (self.rolling_frames(state, before, forces=history and cfg.friction,
+                                        exact_cylinder=cfg.exact_cylinder)
                     if cfg.rolling else self._no_roll)
             kern.solve_batch(state.theta, state.segments, state.normals, state.anchors,
                              roll, state.pos, state.rot, state.stiffness, state.tendon, target,
@@ -564,7 +577,8 @@ class MotionModel:
                     self._store_spin_torques(state, roll, cfg)
                 elif not history:
                     state.spin_torque[state.valid] = 0.0  # the settle's pads spin freely
-                self.roll(state, before, cfg.slide_friction if history else math.inf)
+                self.roll(state, before, cfg.slide_friction if history else math.inf,
+                          cfg.exact_cylinder)
         return status, iters
 
     def _follow(self, state: ParticleState, start: ParticleState, u: np.ndarray,
@@ -596,7 +610,7 @@ class MotionModel:
             status[idx[ok]] = kern.OK
 
     def roll(self, state: ParticleState, normals_before: np.ndarray,
-             slide_friction: float = math.inf) -> None:
+             slide_friction: float = math.inf, exact_cylinder: bool | None = None) -> None:
         """Move the valid particles' contacts to where their pads now touch the object
         (`vlr.surface.roll_contacts`), a contact's stretch returned onto its friction cone
         (`slide_friction`)."""
@@ -605,7 +619,9 @@ class MotionModel:
             return
         n, a = roll_contacts(self.model, self.obj.surface, state.theta[ok], state.normals[ok],
                              state.anchors[ok], state.pos[ok], state.rot[ok],
-                             state.segments[ok], normals_before[ok], slide_friction)
+                             state.segments[ok], normals_before[ok], slide_friction,
+                             self.config.exact_cylinder if exact_cylinder is None
+                             else exact_cylinder)
         if ok.all():
             state.normals, state.anchors = n, a
         else:
@@ -614,7 +630,7 @@ class MotionModel:
     def evaluate(self, state: ParticleState, q: int, u: np.ndarray,
                  roll: np.ndarray | None = None) -> tuple[float, np.ndarray, np.ndarray]:
         """Energy [J], gradient (N K + 6,) and dense Hessian of particle q, in the solver's
-        coordinates (theta, dp, dw). `roll`: the (N, 18) rolling frames (`rolling_frames`),
+        coordinates (theta, dp, dw). `roll`: the (N, 21) rolling frames (`rolling_frames`),
         needed with the rolling term. For tests and diagnostics."""
         if roll is None:
             roll = self.rolling_frames(state)[q] if self.config.rolling else self._no_roll[0]
@@ -646,7 +662,7 @@ class MotionModel:
 def pad_spins(model: HandModel, roll: np.ndarray, theta: np.ndarray,
               rot: np.ndarray) -> np.ndarray:
     """(P, N) each pad's spin against the object about the contact normal since the rolling
-    frames `roll` (P, N, 18) were taken [rad]: s = n . (omega_O - omega_D), omega_O =
+    frames `roll` (P, N, 21) were taken [rad]: s = n . (omega_O - omega_D), omega_O =
     vee(sym(R R0^T)), omega_D = -(sum theta - sum theta_0) x_F (the kernel's `_spin_rate`)."""
     r0 = roll[..., kern.RL_ROT:kern.RL_ROT + 9].reshape(roll.shape[:2] + (3, 3))
     w = np.einsum("pab,pncb->pnac", rot, r0)
@@ -661,7 +677,7 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
                      theta: np.ndarray, pos: np.ndarray, rot: np.ndarray,
                      roll: np.ndarray | None = None) -> float:
     """Plain NumPy energy of particle q at configuration (theta, pos, rot), term by term
-    (Eq. 6, 7 compliant, 8 penalty or rolling with the (N, 18) frames `roll` and the pads'
+    (Eq. 6, 7 compliant, 8 penalty or rolling with the (N, 21) frames `roll` and the pads'
     friction, limits, gravity). The independent reference the vectorised kernel is tested
     against."""
     m, cfg, obj = motion.model, motion.config, motion.obj
@@ -700,8 +716,9 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
         n = roll[:, 3:6]
         tangential = d - np.sum(d * n, axis=-1, keepdims=True) * n
         centre = contact_points(m, theta, np.zeros_like(state.normals[q]), state.segments[q])
-        gap = np.linalg.norm(centre - (pos + roll[:, :3] @ rot.T), axis=-1) \
-            - (obj.surface.kernel_radius + m.pad_radius)
+        gap = pad_gaps(centre, pos + roll[:, kern.RL_CENTRE:kern.RL_CENTRE + 3] @ rot.T,
+                       roll[:, kern.RL_AXIS:kern.RL_AXIS + 3] @ rot.T,
+                       obj.surface.kernel_radius + m.pad_radius)
         kc = cfg.contact_stiffness
         e += 0.5 * kc * np.sum(gap**2)
         spin = np.zeros(len(roll))

@@ -31,7 +31,7 @@ import numpy as np
 from vlr.kinematics import HandModel, contact_points, plane_rotation
 from vlr.spec import ObjectSpec
 
-__all__ = ["LocalSurface", "surface_normals", "roll_contacts"]
+__all__ = ["LocalSurface", "surface_normals", "local_centres", "pad_gaps", "roll_contacts"]
 
 KINDS = ("plane", "sphere", "cylinder")
 
@@ -95,10 +95,49 @@ def surface_normals(model: HandModel, theta: np.ndarray, normals: np.ndarray,
     return -np.einsum("pba,pnb->pna", rot, n_palm)
 
 
+def _side_normals(surface: LocalSurface, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """A cylinder's outward normals m (..., 3) made normal to its axis, and whether each
+    contact is on the side (normal within 60 degrees of normal to the axis; else an end
+    face, flat)."""
+    axis = np.asarray(surface.axis, dtype=float)
+    m_side = m - np.einsum("...i,i->...", m, axis)[..., None] * axis
+    side_len = np.linalg.norm(m_side, axis=-1, keepdims=True)
+    on_side = side_len > 0.5
+    return m_side / np.where(on_side, side_len, 1.0), on_side
+
+
+def local_centres(surface: LocalSurface, anchors: np.ndarray, m: np.ndarray,
+                  exact_cylinder: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """What the motion model's rolling term holds each pad to, in O: the local centre of
+    curvature a - rho m (the local sphere's, `LocalSurface.kernel_radius`) and, for a contact
+    on a cylinder's side with `exact_cylinder`, the cylinder's axis through a - rho m_side
+    (else a zero axis: the sphere). (P, N, 3) each; `m` the object's outward normals at the
+    contacts `anchors` (`surface_normals`)."""
+    axes = np.zeros_like(m)
+    if not (exact_cylinder and surface.kind == "cylinder"):
+        return anchors - surface.kernel_radius * m, axes
+    m_side, on_side = _side_normals(surface, m)
+    centres = np.where(on_side, anchors - surface.radius * m_side,
+                       anchors - surface.kernel_radius * m)
+    axes[...] = np.where(on_side, np.asarray(surface.axis, dtype=float), 0.0)
+    return centres, axes
+
+
+def pad_gaps(centre: np.ndarray, local: np.ndarray, axes: np.ndarray,
+             reach: np.ndarray | float) -> np.ndarray:
+    """(...) the rolling term's gap: each pad centre's distance from its local centre of
+    curvature `local`, or from its local axis through it (`axes`, unit; zero: none), less
+    the reach rho + r (negative: the pad sinks in). All in one frame."""
+    d = centre - local
+    d = d - np.sum(d * axes, axis=-1, keepdims=True) * axes
+    return np.linalg.norm(d, axis=-1) - reach
+
+
 def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
                   normals: np.ndarray, anchors: np.ndarray, pos: np.ndarray, rot: np.ndarray,
                   segments: np.ndarray, normals_before: np.ndarray,
-                  slide_friction: float = math.inf) -> tuple[np.ndarray, np.ndarray]:
+                  slide_friction: float = math.inf,
+                  exact_cylinder: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """Move each contact to where the pad now touches the object's local surface.
 
     Args:
@@ -110,6 +149,8 @@ def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
             its normal force (both k_c times a stretch) has slid: its stretch is returned
             onto the friction cone (the return mapping of elasto-plastic friction). inf: no
             contact slides.
+        exact_cylinder: the rolling term held a cylinder's pads to its axis, not to a
+            sphere of its radius (`MotionConfig.exact_cylinder`): its gap is read alike.
     Returns:
         (normals, anchors): the new pad normals in D and contact points in O. The POM pose
         is unchanged, and so are the rolling term's residuals (the pad-to-surface gap and the
@@ -124,9 +165,8 @@ def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
     # The residuals as the motion model's rolling term sees them (its local sphere).
     d = contact - anchors
     tangential = d - np.sum(d * normals_before, axis=-1, keepdims=True) * normals_before
-    rho_k = surface.kernel_radius
-    gap = (np.linalg.norm(centre - (anchors - rho_k * normals_before), axis=-1, keepdims=True)
-           - (rho_k + radius))
+    local, axes = local_centres(surface, anchors, normals_before, exact_cylinder)
+    gap = pad_gaps(centre, local, axes, surface.kernel_radius + radius[..., 0])[..., None]
     if math.isfinite(slide_friction):
         cap = slide_friction * np.maximum(0.0, -gap)
         t = np.linalg.norm(tangential, axis=-1, keepdims=True)
@@ -138,11 +178,7 @@ def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
         rho = surface.radius
         if surface.kind == "cylinder":
             axis = np.asarray(surface.axis, dtype=float)
-            m_side = m - np.einsum("pni,i->pn", m, axis)[..., None] * axis
-            side_len = np.linalg.norm(m_side, axis=-1, keepdims=True)
-            # A contact on an end face (normal within 60 degrees of the axis) is flat.
-            on_side = side_len > 0.5
-            m_side = m_side / np.where(on_side, side_len, 1.0)
+            m_side, on_side = _side_normals(surface, m)    # an end face is flat
             d = centre - (anchors - rho * m_side)    # from the local axis of curvature
             d = d - np.einsum("pni,i->pn", d, axis)[..., None] * axis
             d_len = np.linalg.norm(d, axis=-1, keepdims=True)

@@ -152,6 +152,8 @@ class TrialSettings:
             (`sim.pads`).
         spin_memory: with spin_friction, each particle's pads keep their spin torques from
             one action to the next (`vlr.motion.MotionConfig.spin_memory`).
+        exact_cylinder: with rolling on a cylinder, the pads are held to its axis, not to a
+            sphere of its radius (`vlr.motion.MotionConfig.exact_cylinder`).
         exploration: "random" actions (the paper) or "active" (vlr.active).
         active_model_error: with active exploration, the model's expected error as a
             fraction of each candidate's predicted motion (`ActiveExploration.model_error`).
@@ -206,6 +208,7 @@ class TrialSettings:
     slide_friction: float | None = None
     spin_friction: float = 0.0
     spin_memory: bool = False
+    exact_cylinder: bool = False
     exploration: str = "random"
     active_model_error: float = 0.0
     active_criterion: str = "spread"
@@ -348,7 +351,7 @@ class TrialSettings:
         if self.jitter_h is not None and not (is_real(self.jitter_h)
                                               and 0 <= self.jitter_h < 1):
             raise bad("jitter_h", "a number in [0, 1) (or none: the filter's default)")
-        for name in ("link_scaling", "spin_memory"):
+        for name in ("link_scaling", "spin_memory", "exact_cylinder"):
             if not isinstance(getattr(self, name), bool):
                 raise bad(name, "true or false")
         if not isinstance(self.rolling, bool | None):
@@ -472,7 +475,7 @@ class TrialSettings:
         return replace(cfg, slide_friction=(math.inf if self.slide_friction is None
                                             else float(self.slide_friction)),
                        spin_friction=float(self.spin_friction),
-                       spin_memory=self.spin_memory)
+                       spin_memory=self.spin_memory, exact_cylinder=self.exact_cylinder)
 
 
 @dataclass

@@ -76,7 +76,7 @@ def glued(actions: int = 6) -> None:
                       - st.pos[:, None])
         dv = c - st.anchors
         t = np.linalg.norm(dv - np.sum(dv * m, -1, keepdims=True) * m, axis=-1)[0]
-        n = mm.normal_forces(st, mm.rolling_frames(st, m)[..., :3])[0]
+        n = mm.normal_forces(st, mm.rolling_frames(st, m))[0]
         print(f"action {k}: normal {np.round(n, 2)} N, tangential "
               f"{np.round(ROLL.contact_stiffness * t, 2)} N")
 

@@ -56,7 +56,7 @@ def main() -> None:
         print(f"{args.object}, seed {args.seed}: predicted normal force per finger [N], "
               "median and 5th percentile over the subset, and the sim's outcome")
         m0 = surface_normals(pf.model, base.theta, base.normals, base.rot)
-        f0 = pf.motion.normal_forces(base, pf.motion.rolling_frames(base, m0)[..., :3])
+        f0 = pf.motion.normal_forces(base, pf.motion.rolling_frames(base, m0))
         print("before the action: " + "  ".join(
             f"{n} {a:5.2f}" for n, a in zip(names, np.median(f0, axis=0), strict=True)))
         for k, delta in enumerate(cands):
@@ -64,7 +64,7 @@ def main() -> None:
             pf.motion.solve(st, u + delta, u_from=u)
             ok = st.valid
             m = surface_normals(pf.model, st.theta, st.normals, st.rot)
-            f = pf.motion.normal_forces(st, pf.motion.rolling_frames(st, m)[..., :3])[ok]
+            f = pf.motion.normal_forces(st, pf.motion.rolling_frames(st, m))[ok]
             med, low = np.median(f, axis=0), np.percentile(f, 5, axis=0)
             outcome = _sim_outcome(ts, delta)
             cols = "  ".join(f"{n} {a:5.2f}/{b:5.2f}" for n, a, b in zip(names, med, low,

@@ -115,7 +115,7 @@ def main(obj: str = "apple", seed: int = 0, actions: int = 30) -> None:
         true_turn = _angle_deg(t1.rotation @ t0.rotation.T)
         sim = spin_roll(model, t0.theta, t0.rotation, t1.theta, t1.rotation, t1.normals)
         mod = spin_roll(model, th0, r0, st.theta[0], st.rot[0], st.normals[0])
-        n_model = mm.normal_forces(st, mm.rolling_frames(st)[..., :3])[0]
+        n_model = mm.normal_forces(st, mm.rolling_frames(st))[0]
         ratio = math.degrees(np.linalg.norm(e_r)) / true_turn if true_turn > 0 else math.nan
         print(f"action {k + 1:2d}: turn {true_turn:5.2f} deg, error "
               f"{math.degrees(np.linalg.norm(e_r)):4.2f} (ratio {ratio:4.2f}), error axis "

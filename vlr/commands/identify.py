@@ -84,6 +84,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--spin-memory", action="store_true",
                    help="with --spin-friction: each particle's pads keep their spin torques "
                    "from one action to the next (default: each action starts them at 0)")
+    p.add_argument("--exact-cylinder", action="store_true",
+                   help="with rolling contacts on a cylinder (the wine glass, the screwdriver):"
+                   " hold the pads to its axis (default: to a sphere of its radius)")
     p.add_argument("--exploration", choices=("random", "active"), default="random",
                    help="random actions (the paper) or active: the candidate whose predicted "
                    "POM poses disagree most across the particles")
@@ -196,6 +199,7 @@ def run(args: argparse.Namespace) -> int:
         rolling=args.rolling,
         slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, spin_memory=args.spin_memory,
+        exact_cylinder=args.exact_cylinder,
         exploration=args.exploration,
         active_model_error=args.active_model_error,
         active_criterion=args.active_criterion, active_min_force_n=args.active_min_force,
