@@ -81,6 +81,9 @@ class GapSettings:
             per-action gap restarts from a settle, which holds none.
         exact_cylinder: in the rolling rungs, a pad on a cylinder's side is held to the
             cylinder's axis, not to a sphere of its radius (`MotionConfig.exact_cylinder`).
+        limit_stiffness: the model's joint stops [N m/rad] (`MotionConfig.limit_stiffness`;
+            the sim's are about 120 at the proximal joints and 18 at the distal ones, since
+            MuJoCo scales a limit's stiffness with the link's inertia).
     """
 
     object: str = "apple"
@@ -97,10 +100,13 @@ class GapSettings:
     contact_stiffness: float = MotionConfig.contact_stiffness
     spin_memory: bool = False
     exact_cylinder: bool = False
+    limit_stiffness: float = MotionConfig.limit_stiffness
 
     def __post_init__(self) -> None:
         if not (np.isfinite(self.contact_stiffness) and self.contact_stiffness > 0):
             raise UserError(f"contact stiffness {self.contact_stiffness!r} N/m must be > 0")
+        if not (np.isfinite(self.limit_stiffness) and self.limit_stiffness > 0):
+            raise UserError(f"limit stiffness {self.limit_stiffness!r} N m/rad must be > 0")
         if not isinstance(self.actions, int) or self.actions < 1:
             raise UserError(f"actions {self.actions!r} must be an integer >= 1")
         if not isinstance(self.drift_actions, int) or self.drift_actions < 1:
@@ -247,7 +253,8 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
     cfg = MotionConfig(terms=terms, rolling_substeps=settings.rolling_substeps,
                        spin_stiffness=settings.spin_stiffness,
                        contact_stiffness=settings.contact_stiffness,
-                       exact_cylinder=settings.exact_cylinder)
+                       exact_cylinder=settings.exact_cylinder,
+                       limit_stiffness=settings.limit_stiffness)
     if friction == "friction":
         cfg = replace(cfg, slide_friction=settings.slide_friction,
                       spin_friction=settings.spin_friction,
@@ -377,6 +384,7 @@ def gap_report(settings: GapSettings,
         "spin_friction": settings.spin_friction,
         "spin_memory": settings.spin_memory,
         "exact_cylinder": settings.exact_cylinder,
+        "limit_stiffness": settings.limit_stiffness,
         "contact_stiffness": settings.contact_stiffness,
         "true_motion": {"position_mm_mean": float(np.mean(true_p)),
                         "orientation_deg_mean": float(np.mean(true_r))},
@@ -464,6 +472,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--exact-cylinder", action="store_true",
                    help="in the rolling rungs, a pad on a cylinder is held to its axis, not "
                    "to a sphere of its radius (MotionConfig.exact_cylinder)")
+    p.add_argument("--limit-stiffness", type=float, default=MotionConfig.limit_stiffness,
+                   metavar="K_LIM", help="the model's joint stops [N m/rad] (default "
+                   f"{MotionConfig.limit_stiffness:g}; the sim's distal stops are about 18)")
     p.add_argument("--json", help="write the report (per object, per model rung) as JSON")
     p.set_defaults(func=run)
 
@@ -489,7 +500,8 @@ def run(args: argparse.Namespace) -> int:
                                spin_friction=args.spin_friction,
                                contact_stiffness=args.contact_stiffness,
                                spin_memory=args.spin_memory,
-                               exact_cylinder=args.exact_cylinder)
+                               exact_cylinder=args.exact_cylinder,
+                               limit_stiffness=args.limit_stiffness)
         rep = gap_report(settings)
         print(format_report(rep) + "\n", flush=True)
         reports.append(rep)
