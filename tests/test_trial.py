@@ -183,6 +183,10 @@ def test_contact_stiffness_anneal_stages_link_scaling_and_priors_reach_the_filte
     cfg = identify_config(TrialSettings(backend="synthetic", particles=50,
                                         contact_stiffness=2e4, anneal_stages=4), model).filter
     assert cfg.motion.contact_stiffness == 2e4 and cfg.anneal_stages == 4
+    assert default.motion.limit_stiffness == MotionConfig.limit_stiffness
+    assert identify_config(TrialSettings(backend="synthetic", particles=50,
+                                         limit_stiffness=17.0),
+                           model).filter.motion.limit_stiffness == 17.0
     assert default.motion.cone_return == float("inf")
     cone = identify_config(TrialSettings(backend="synthetic", particles=50, rolling=True,
                                          cone_return=1.0), model).filter
@@ -213,6 +217,8 @@ def test_contact_stiffness_anneal_stages_link_scaling_and_priors_reach_the_filte
                        (dict(jitter_h="wide"), "jitter_h 'wide'"),
                        (dict(contact_stiffness=0.0), "contact_stiffness 0.0"),
                        (dict(contact_stiffness="soft"), "contact_stiffness 'soft'"),
+                       (dict(limit_stiffness=-1.0), "limit_stiffness -1.0"),
+                       (dict(limit_stiffness="hard"), "limit_stiffness 'hard'"),
                        (dict(anneal_stages=0), "anneal_stages 0"),
                        (dict(cone_return=0.0, rolling=True), "cone_return 0.0"),
                        (dict(cone_return=1.0, rolling=False), "rolling"),

@@ -168,6 +168,8 @@ class TrialSettings:
             identification's 0.4 mm (and at least the range's high end).
         contact_stiffness: the motion model's contact penalty k_c [N/m]
             (`vlr.motion.MotionConfig`); None: its default.
+        limit_stiffness: the motion model's joint stops [N m/rad]
+            (`vlr.motion.MotionConfig`); None: its default (100).
         cone_return: with rolling, the sliding friction coefficient of the return map
             between solves (`vlr.motion.MotionConfig.cone_return`); None: off. Not with
             slide_friction or spin_friction (the friction in the energy already slides).
@@ -217,6 +219,7 @@ class TrialSettings:
     action_band_mm: float | None = None
     anneal_stages: int = 1
     contact_stiffness: float | None = None
+    limit_stiffness: float | None = None
     cone_return: float | None = None
     link_scaling: bool = False
     jitter_h: float | None = None
@@ -286,6 +289,9 @@ class TrialSettings:
         if self.contact_stiffness is not None and not (
                 math.isfinite(self.contact_stiffness) and self.contact_stiffness > 0):
             raise UserError(f"contact_stiffness {self.contact_stiffness} N/m must be > 0")
+        if self.limit_stiffness is not None and not (
+                math.isfinite(self.limit_stiffness) and self.limit_stiffness > 0):
+            raise UserError(f"limit_stiffness {self.limit_stiffness} N m/rad must be > 0")
         if self.prior_spread_deg is not None and not self.prior_spread_deg > 0:
             raise UserError(f"prior_spread_deg {self.prior_spread_deg} must be > 0")
         if self.contact_spread_deg is not None and not 0 < self.contact_spread_deg <= 90:
@@ -330,7 +336,7 @@ class TrialSettings:
                      "sigma_turn_deg", "sigma_tension_n", "tension_noise_n",
                      "slide_friction", "spin_friction", "active_model_error",
                      "active_min_force_n",
-                     "contact_stiffness", "cone_return"):
+                     "contact_stiffness", "limit_stiffness", "cone_return"):
             v = getattr(self, name)
             if not (is_real(v) or (v is None and name in ("sigma_pos_mm", "sigma_rot_deg",
                                                           "sigma_turn_deg",
@@ -338,6 +344,7 @@ class TrialSettings:
                                                           "contact_spread_deg",
                                                           "slide_friction",
                                                           "contact_stiffness",
+                                                          "limit_stiffness",
                                                           "cone_return"))):
                 raise bad(name, "a number")
         if self.noise_prior is not None:
@@ -468,6 +475,8 @@ class TrialSettings:
         cfg = MotionConfig().with_rolling(self.uses_rolling)
         if self.contact_stiffness is not None:
             cfg = replace(cfg, contact_stiffness=float(self.contact_stiffness))
+        if self.limit_stiffness is not None:
+            cfg = replace(cfg, limit_stiffness=float(self.limit_stiffness))
         if self.cone_return is not None:
             cfg = replace(cfg, cone_return=float(self.cone_return))
         if self.link_scaling:

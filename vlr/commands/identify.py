@@ -108,6 +108,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="commands stay within B mm of the grasp command (default 0.4)")
     p.add_argument("--contact-stiffness", type=float, default=None, metavar="K_C",
                    help="the motion model's contact penalty [N/m] (default 1e6)")
+    p.add_argument("--limit-stiffness", type=float, default=None, metavar="K_LIM",
+                   help="the motion model's joint stops [N m/rad] (default 100)")
     p.add_argument("--cone-return", type=float, default=None, metavar="MU",
                    help="with rolling contacts: after each action return the contacts' "
                    "stretch onto the friction cone MU N and settle again (a cheap stand-in "
@@ -204,7 +206,8 @@ def run(args: argparse.Namespace) -> int:
         active_model_error=args.active_model_error,
         active_criterion=args.active_criterion, active_min_force_n=args.active_min_force,
         anneal_stages=args.anneal_stages,
-        contact_stiffness=args.contact_stiffness, cone_return=args.cone_return,
+        contact_stiffness=args.contact_stiffness, limit_stiffness=args.limit_stiffness,
+        cone_return=args.cone_return,
         link_scaling=args.link_scaling, jitter_h=args.jitter_h, noise_prior=args.noise_prior,
         action_range_mm=args.action_range_mm, action_band_mm=args.action_band_mm)
     bar = None
