@@ -64,7 +64,8 @@ class LocalSurface:
     def kernel_radius(self) -> float:
         """The radius of the local sphere the motion model's rolling term uses [m]: the
         sphere's own, a cylinder's (a sphere of its radius: exact around the axis, too
-        curved along it), and 10 m for a plane (flat within 0.1% of a pad's travel; an
+        curved along it, unless `MotionConfig.exact_cylinder` holds the pads to the axis;
+        `local_centres`), and 10 m for a plane (flat within 0.1% of a pad's travel; an
         infinite radius has no centre to hold fixed)."""
         return 10.0 if self.kind == "plane" else self.radius
 
