@@ -100,6 +100,8 @@ def test_pad_friction_reaches_the_filter_and_needs_rolling():
     assert not TrialSettings(rolling=True).motion_config().exact_cylinder
     with pytest.raises(UserError, match="exact_cylinder 1"):
         TrialSettings(rolling=True, exact_cylinder=1)
+    with pytest.raises(UserError, match="exact_cylinder .*set rolling too"):
+        TrialSettings(backend="synthetic", exact_cylinder=True)
     with pytest.raises(UserError, match="set rolling too"):
         TrialSettings(backend="synthetic", slide_friction=1.0)
     with pytest.raises(UserError, match="set rolling too"):

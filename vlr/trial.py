@@ -372,6 +372,9 @@ class TrialSettings:
         if not 0 <= self.active_min_force_n < 100:
             raise UserError(f"active_min_force_n {self.active_min_force_n} must be in "
                             "[0, 100)")
+        if self.exact_cylinder and not self.uses_rolling:
+            raise UserError("exact_cylinder holds the rolling contacts' pads to a cylinder's "
+                            "axis: set rolling too")
         if self.active_min_force_n and not self.uses_rolling:
             raise UserError("active_min_force_n screens the rolling contacts' normal forces: "
                             "set rolling too")
