@@ -106,12 +106,12 @@ def _axis_curvature(i, k_n, nf, dist, dv, u, a, R, jac, M, B, C):
     w1 = dv[0] * R[0, 1] + dv[1] * R[1, 1] + dv[2] * R[2, 1]
     w2 = dv[0] * R[0, 2] + dv[1] * R[1, 2] + dv[2] * R[2, 2]
     k = (w2 * a[1] - w1 * a[2], w0 * a[2] - w2 * a[0], w1 * a[0] - w0 * a[1])
-    mu = (M[0, 0] * u[0] + M[1, 0] * u[1] + M[2, 0] * u[2],
-          M[0, 1] * u[0] + M[1, 1] * u[1] + M[2, 1] * u[2],
-          M[0, 2] * u[0] + M[1, 2] * u[1] + M[2, 2] * u[2])
+    mdu = (M[0, 0] * u[0] + M[1, 0] * u[1] + M[2, 0] * u[2],    # M_b . u
+           M[0, 1] * u[0] + M[1, 1] * u[1] + M[2, 1] * u[2],
+           M[0, 2] * u[0] + M[1, 2] * u[1] + M[2, 2] * u[2])
     for b in range(3):
         for c in range(3):
-            C[3 + b, 3 + c] -= nf * (dist * k[b] * k[c] + mu[b] * k[c] + mu[c] * k[b])
+            C[3 + b, 3 + c] -= nf * (dist * k[b] * k[c] + mdu[b] * k[c] + mdu[c] * k[b])
             C[b, 3 + c] += nf * u[b] * k[c]
             C[3 + c, b] += nf * u[b] * k[c]
     for j in range(k_n):
