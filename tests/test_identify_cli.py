@@ -48,6 +48,8 @@ def test_identify_synthetic_writes_result_history_and_plot(tmp_path):
                                atol=1e-9)
     np.testing.assert_allclose(result["proximal_median_deg_by_iteration"][-1],
                                result["errors_median"]["proximal_deg_mean"], atol=1e-4)
+    np.testing.assert_allclose(result["joint_median_deg_by_iteration"][-1],
+                               result["errors_median"]["joint_deg_mean"], atol=1e-4)
 
 
 def test_identify_records_each_unknowns_error_per_iteration(tmp_path):
@@ -63,6 +65,8 @@ def test_identify_records_each_unknowns_error_per_iteration(tmp_path):
                                rtol=1e-3)
     hist = np.load(out / "history.npz")
     np.testing.assert_allclose(path, np.abs(hist["mean"][:, -1] - 0.045), rtol=1e-3)
+    med = result["unknown_error_median_by_iteration"]["stiffness:thumb.distal"]
+    np.testing.assert_allclose(med, np.abs(hist["median"][:, -1] - 0.045), rtol=1e-3)
     # convergence.png plots the unknown beside the joints, against its truth
     np.testing.assert_allclose(hist["truth_unknowns"], 0.045, rtol=1e-9)
     assert (out / "convergence.png").stat().st_size > 1000

@@ -49,11 +49,20 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
             out["proximal_median_deg_by_iteration"] = [
                 round(float(sc.theta_error_median_deg.reshape(n, k)[:, 0].mean()), 4)
                 for sc in result.scores]
+            # Every joint's mean error, the paper's "joints" figure of the novel-finger rows,
+            # so that one long trial gives the rows at any shorter budget.
+            out["joint_median_deg_by_iteration"] = [
+                round(float(sc.theta_error_median_deg.mean()), 4) for sc in result.scores]
         # Each unknown's error per iteration (SI units): how far the budget was from enough.
         if result.scores[-1].unknown_error:
             out["unknown_error_by_iteration"] = {
                 spec: [float(f"{abs(sc.unknown_error[spec]):.4g}") for sc in result.scores]
                 for spec in result.scores[-1].unknown_error}
+        if result.scores[-1].unknown_error_median:
+            out["unknown_error_median_by_iteration"] = {
+                spec: [float(f"{abs(sc.unknown_error_median[spec]):.4g}")
+                       for sc in result.scores]
+                for spec in result.scores[-1].unknown_error_median}
         s = result.scores[-1]
         errors = _errors(s.theta_error_deg.reshape(n, k), s.unknown_error, model)
         if final_truth is not None:
