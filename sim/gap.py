@@ -474,7 +474,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "to a sphere of its radius (MotionConfig.exact_cylinder)")
     p.add_argument("--limit-stiffness", type=float, default=MotionConfig.limit_stiffness,
                    metavar="K_LIM", help="the model's joint stops [N m/rad] (default "
-                   f"{MotionConfig.limit_stiffness:g}; the sim's distal stops are about 18)")
+                   f"{MotionConfig.limit_stiffness:g}; the sim's distal stops are about 18, "
+                   "and vlr identify's sim default is 17)")
     p.add_argument("--json", help="write the report (per object, per model rung) as JSON")
     p.set_defaults(func=run)
 

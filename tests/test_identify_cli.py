@@ -140,6 +140,8 @@ def test_identify_says_the_likelihood_and_the_contact_prior_in_effect():
     assert "likelihood: 0.2 mm / 0.4 deg + a 1 deg turn" in format_table(result, summary, None)
     summary["sigma_turn_deg"] = 0.0
     assert format_table(result, summary, None).endswith("likelihood: 0.2 mm / 0.4 deg")
+    summary["limit_stiffness"] = 17.0
+    assert format_table(result, summary, None).endswith("joint stops: 17 N m/rad")
     summary["grasp_guess"] = {"contact_prior": "surface", "contact_spread_deg": 8.594}
     assert format_table(result, summary, None).endswith(
         "contact prior: surface (where the pads would touch the object's surface), 8.6 deg "

@@ -124,6 +124,21 @@ def test_rolling_contacts_by_default_on_the_sim_and_pinned_on_the_synthetic_worl
         TrialSettings(rolling="yes")
 
 
+def test_joint_stops_follow_the_backend_and_an_explicit_one_wins():
+    """The sim's model stops are as soft as its distal MuJoCo limits (17 N m/rad, measured
+    better over the whole table, docs/RESULTS.md 5); the synthetic world and the real hand
+    keep the model's 100."""
+    from vlr.motion import MotionConfig
+
+    assert TrialSettings(backend="sim").motion_config().limit_stiffness == 17.0
+    assert TrialSettings(backend="sim").limit_stiffness_in_effect == 17.0
+    for other in (TrialSettings(backend="synthetic"),
+                  TrialSettings(backend="hardware", config="x.yaml")):
+        assert other.motion_config().limit_stiffness == MotionConfig.limit_stiffness == 100.0
+    assert TrialSettings(backend="sim",
+                         limit_stiffness=100.0).motion_config().limit_stiffness == 100.0
+
+
 def test_the_grasp_guess_follows_the_backend_and_an_explicit_one_wins():
     """The sim's default guess is the one its identification rows use (-10, 15) +- 10
     degrees (the generic guess identified the sim apple 12 degrees off); the synthetic world

@@ -26,7 +26,7 @@ import numpy as np
 from vlr.errors import UserError
 
 __all__ = ["TrialSettings", "World", "TrialRun", "open_world", "identify_trial", "run_trial",
-           "DEFAULT_SIGMA", "ROLLING_SIGMA", "ROLLING_TURN_SIGMA"]
+           "DEFAULT_SIGMA", "ROLLING_SIGMA", "ROLLING_TURN_SIGMA", "LIMIT_STIFFNESS_DEFAULT"]
 
 # Likelihood scales (sigma_pos [mm], sigma_rot [deg]) per backend (vlr.observation). The
 # synthetic world IS the model, so only its observation noise (0.05 mm, 0.2 deg) counts, with a
@@ -51,6 +51,19 @@ ROLLING_SIGMA = {"sim": (0.35, 0.7)}
 # replaced links 0.89 and 1.41 against 2.87 and 2.99 mm; NH1 loses (proximal joints 2.43
 # against 1.92 degrees) and the NH rows' coverage is lower (docs/RESULTS.md 5).
 ROLLING_TURN_SIGMA = {"sim": (0.2, 0.4, 1.0)}
+
+# The motion model's joint stops [N m/rad] per backend, when a trial does not say
+# (`limit_stiffness`); other backends keep `vlr.motion.MotionConfig`'s 100. The sim's stops
+# are MuJoCo soft limits whose stiffness scales with the link's inertia: about 18 N m/rad at
+# the distal joints, where the grasps rest on them, and 120 at the proximal ones
+# (models/README.md; docs/scripts/sim_stop_stiffness.py). Measured in the sim from rendered
+# frames (60,000 particles, 20 actions, 5 seeds, all eight rows of the paper's table,
+# docs/sweeps/sim-60k-surface-stops.yaml against sim-60k-surface.yaml, posterior median):
+# strict coverage 0.97 against 0.88, NH2's link 2.96 against 3.22 mm, every NH joint figure
+# and the spring (0.0035 against 0.0037) lower, the known hand 0.54 against 0.50 degrees;
+# held out at 10,000 particles (seeds 5-9) the known hand 0.75 against 0.80 (docs/RESULTS.md
+# 5, session 27). The real hand's stops are hard plastic of unknown stiffness: it keeps 100.
+LIMIT_STIFFNESS_DEFAULT = {"sim": 17.0}
 
 # Synthetic world: an unknown spring whose true rate is not given is drawn from this range of
 # its nominal rate, with the trial's seed (a replaced spring is not the nominal one).
@@ -169,7 +182,8 @@ class TrialSettings:
         contact_stiffness: the motion model's contact penalty k_c [N/m]
             (`vlr.motion.MotionConfig`); None: its default.
         limit_stiffness: the motion model's joint stops [N m/rad]
-            (`vlr.motion.MotionConfig`); None: its default (100).
+            (`vlr.motion.MotionConfig`); None: the backend's default
+            (`LIMIT_STIFFNESS_DEFAULT`, the sim's 17), else the model's 100.
         cone_return: with rolling, the sliding friction coefficient of the return map
             between solves (`vlr.motion.MotionConfig.cone_return`); None: off. Not with
             slide_friction or spin_friction (the friction in the energy already slides).
@@ -465,6 +479,16 @@ class TrialSettings:
         return CONTACT_PRIOR_DEFAULT.get(self.backend, "pad")
 
     @property
+    def limit_stiffness_in_effect(self) -> float:
+        """The motion model's joint stops [N m/rad] in effect: `limit_stiffness`, or the
+        backend's default, or `vlr.motion.MotionConfig`'s."""
+        from vlr.motion import MotionConfig
+
+        if self.limit_stiffness is not None:
+            return float(self.limit_stiffness)
+        return LIMIT_STIFFNESS_DEFAULT.get(self.backend, MotionConfig.limit_stiffness)
+
+    @property
     def uses_rolling(self) -> bool:
         """Rolling contacts in effect: `rolling`, or the backend's default."""
         if self.rolling is not None:
@@ -478,8 +502,7 @@ class TrialSettings:
         cfg = MotionConfig().with_rolling(self.uses_rolling)
         if self.contact_stiffness is not None:
             cfg = replace(cfg, contact_stiffness=float(self.contact_stiffness))
-        if self.limit_stiffness is not None:
-            cfg = replace(cfg, limit_stiffness=float(self.limit_stiffness))
+        cfg = replace(cfg, limit_stiffness=self.limit_stiffness_in_effect)
         if self.cone_return is not None:
             cfg = replace(cfg, cone_return=float(self.cone_return))
         if self.link_scaling:
@@ -726,6 +749,7 @@ def identify_trial(settings: TrialSettings, progress: Callable | None = None,
     summary["rolling"] = settings.uses_rolling   # in effect (`rolling` None: the backend's)
     summary["sigma"] = list(settings.sigma)       # in effect, [mm, deg]
     summary["sigma_turn_deg"] = settings.turn_deg  # in effect, [deg]; 0 = no turn term
+    summary["limit_stiffness"] = settings.limit_stiffness_in_effect  # in effect [N m/rad]
     guess, spread = settings.grasp_guess          # in effect (None: the backend's default)
     summary["grasp_guess"] = {"nominal_theta_deg": None if guess is None else list(guess),
                               "prior_spread_deg": float(spread),

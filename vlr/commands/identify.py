@@ -109,7 +109,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--contact-stiffness", type=float, default=None, metavar="K_C",
                    help="the motion model's contact penalty [N/m] (default 1e6)")
     p.add_argument("--limit-stiffness", type=float, default=None, metavar="K_LIM",
-                   help="the motion model's joint stops [N m/rad] (default 100)")
+                   help="the motion model's joint stops [N m/rad] (default: the sim's 17, "
+                   "the real hand's 100)")
     p.add_argument("--cone-return", type=float, default=None, metavar="MU",
                    help="with rolling contacts: after each action return the contacts' "
                    "stretch onto the friction cone MU N and settle again (a cheap stand-in "
@@ -300,6 +301,8 @@ def format_table(result, summary: dict, model) -> str:
             noise = settings.get("tension_noise_n") or 0.0
             lines.append(f"tensions weighed at {settings['sigma_tension_n']:g} N"
                          + (f" (the sim's readings {noise:g} N noisy)" if noise else ""))
+    if summary.get("limit_stiffness"):
+        lines.append(f"joint stops: {summary['limit_stiffness']:g} N m/rad")
     guess = summary.get("grasp_guess", {})
     if guess.get("contact_prior"):
         where = {"surface": "where the pads would touch the object's surface",
