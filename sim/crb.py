@@ -356,6 +356,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="as vlr identify (default 0.4)")
     p.add_argument("--slide-friction", type=float, default=None, metavar="MU",
                    help="the filter model's pads' sliding friction (as vlr identify)")
+    p.add_argument("--limit-stiffness", type=float, default=None, metavar="K_LIM",
+                   help="the model's joint stops [N m/rad] (default: vlr identify's, the "
+                   "sim's 17 since session 28; 100 before)")
     p.add_argument("--spin-friction", type=float, default=0.0, metavar="MU_T",
                    help="the filter model's pads' torsional friction [m] (as vlr identify)")
     p.add_argument("--relative-step", type=float, default=0.02,
@@ -384,7 +387,7 @@ def _trials(args: argparse.Namespace) -> list[tuple[str, TrialSettings]]:
         prior_spread_deg=args.prior_spread_deg, contact_spread_deg=args.contact_spread_deg,
         slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, action_range_mm=args.action_range_mm,
-        action_band_mm=args.action_band_mm))]
+        action_band_mm=args.action_band_mm, limit_stiffness=args.limit_stiffness))]
 
 
 def _replays(paths: list[str]) -> list[tuple[str, TrialSettings, tuple]]:

@@ -4,7 +4,9 @@ section 2, "The stiffness row with 40 actions").
 A one-off reader, not part of the package. For every finished trial of a sweep folder it
 reads `unknown_error_by_iteration` from the trial record (entry 0 is the grasp's update,
 entry n the error after n actions; SI units) and prints, per case and unknown, the error at
-each asked action count per seed, and the mean and sd over seeds.
+each asked action count per seed, and the mean and sd over seeds. With `--median` it reads
+the posterior median's errors instead, and every joint's mean error [deg] as the unknown
+`joints` (trials recorded since session 28).
 
     python docs/scripts/unknown_path.py runs/sweep-sim-60k-stiffness-40 [--at 15 20 30 40]
 """
@@ -16,15 +18,21 @@ from pathlib import Path
 import numpy as np
 
 
-def paths(out: Path):
+def paths(out: Path, median: bool = False):
     """(case, seed, unknown, errors per iteration) of each finished trial in OUT/trials."""
     for f in sorted((out / "trials").glob("*.json")):
         rec = json.loads(f.read_text())
         if rec.get("status") != "ok":
             continue
-        by_it = rec["result"].get("unknown_error_by_iteration") or {}
-        for spec, errs in by_it.items():
+        res = rec["result"]
+        key = "unknown_error_median_by_iteration" if median else "unknown_error_by_iteration"
+        if median and key not in res:
+            raise SystemExit(f"{f} has no {key}: recorded before session 28")
+        for spec, errs in (res.get(key) or {}).items():
             yield rec["case"], rec["settings"]["seed"], spec, errs
+        if median:
+            yield rec["case"], rec["settings"]["seed"], "joints", \
+                res["joint_median_deg_by_iteration"]
 
 
 def main() -> None:
@@ -32,11 +40,13 @@ def main() -> None:
     ap.add_argument("out", type=Path, help="a sweep's output folder")
     ap.add_argument("--at", type=int, nargs="+", default=[15, 20, 30, 40],
                     help="action counts (default 15 20 30 40)")
+    ap.add_argument("--median", action="store_true",
+                    help="the posterior median's errors, and every joint's mean error [deg]")
     args = ap.parse_args()
     if not (args.out / "trials").is_dir():
         ap.error(f"{str(args.out)!r} has no trials/ folder: not a sweep's output folder")
     groups: dict[tuple[str, str], dict[int, list[float]]] = {}
-    for case, seed, spec, errs in paths(args.out):
+    for case, seed, spec, errs in paths(args.out, args.median):
         row = [errs[n] if n < len(errs) else float("nan") for n in args.at]
         print(f"{case} | {spec} | seed {seed} | "
               + " ".join(f"{n}: {e:.4g}" for n, e in zip(args.at, row, strict=True)))
