@@ -21,6 +21,13 @@ the TRUE hand parameters, so that what remains is the model's own error:
   the tensions the sim reports (`ApplyReport.tensions`), and at its settle on the true state:
   the scale of the likelihood's `sigma_tension`.
 
+Where each prediction starts (`GapSettings.start`): "settle", the true configuration settled
+at the command with glued contacts (the issue's measure); or "sim-loads", the true
+configuration with each contact's stretch set to the sim's own contact force on the object
+(`sim.truth.pad_forces`), relaxed at the command. The sim's contacts carry loads from their
+history (which side of its cone a contact sits on, how the squeeze between the side fingers
+is shared) that no settle can know; "sim-loads" measures how much of the gap that is.
+
 Each model term is switched on in turn (`LADDER`), so each one's share is a measured figure.
 This is a sim-only tool (it reads ground truth); the estimator never runs it.
 """
@@ -57,6 +64,7 @@ LADDER: tuple[tuple[str, tuple[str, ...], str], ...] = (
     ("+ friction", _ALL, "friction"),
 )
 OBJECTS = ("apple", "wine_glass", "toy_block", "flat_screwdriver", "gelatin_box")
+STARTS = ("settle", "sim-loads")
 
 
 @dataclass(frozen=True)
@@ -84,6 +92,7 @@ class GapSettings:
         limit_stiffness: the model's joint stops [N m/rad] (`MotionConfig.limit_stiffness`;
             the sim's are about 120 at the proximal joints and 18 at the distal ones, since
             MuJoCo scales a limit's stiffness with the link's inertia).
+        start: where each prediction starts (module docstring): "settle" or "sim-loads".
     """
 
     object: str = "apple"
@@ -101,8 +110,11 @@ class GapSettings:
     spin_memory: bool = False
     exact_cylinder: bool = False
     limit_stiffness: float = MotionConfig.limit_stiffness
+    start: str = "settle"
 
     def __post_init__(self) -> None:
+        if self.start not in STARTS:
+            raise UserError(f"start {self.start!r}: expected one of {', '.join(STARTS)}")
         if not (np.isfinite(self.contact_stiffness) and self.contact_stiffness > 0):
             raise UserError(f"contact stiffness {self.contact_stiffness!r} N/m must be > 0")
         if not (np.isfinite(self.limit_stiffness) and self.limit_stiffness > 0):
@@ -135,7 +147,8 @@ class GapSettings:
 class Recording:
     """What the simulator did: commands u_0..u_n [m], the true state after each
     (`vlr.synthetic.Truth`, from `SimHand.scoring_truth`) and the tendon tensions it reported
-    (`ApplyReport.tensions`) [N]."""
+    (`ApplyReport.tensions`) [N], and each finger's contact force on the object after each
+    (`sim.truth.pad_forces`, palm frame) [N]."""
 
     hand_spec: object
     object_spec: object
@@ -143,6 +156,7 @@ class Recording:
     truths: list
     dropped_at: int | None
     tensions: list[np.ndarray] = field(default_factory=list)
+    forces: list[np.ndarray] = field(default_factory=list)
 
 
 def record_actions(settings: GapSettings) -> Recording:
@@ -150,11 +164,12 @@ def record_actions(settings: GapSettings) -> Recording:
 
     Stops early if the fingertip grasp is lost (`dropped_at`: the action that lost it)."""
     from sim.backend import SimHand
+    from sim.truth import pad_forces
 
     with SimHand(object=settings.object, hand=settings.hand, seed=settings.seed) as hand:
         grasp = hand.grasp()
         commands, tensions = [grasp.commands], [grasp.tensions]
-        truths = [hand.scoring_truth()]
+        truths, forces = [hand.scoring_truth()], [pad_forces(hand)]
         rng = np.random.default_rng(settings.seed + 1)  # vlr identify's action stream
         explore = ExplorationRange(settings.action_range[0], settings.action_range[1],
                                    max(settings.band, settings.action_range[1]))
@@ -169,12 +184,29 @@ def record_actions(settings: GapSettings) -> Recording:
             commands.append(report.commands)
             tensions.append(report.tensions)
             truths.append(t)
-        return Recording(hand.true_spec, hand.object_spec, commands, truths, dropped, tensions)
+            forces.append(pad_forces(hand))
+        return Recording(hand.true_spec, hand.object_spec, commands, truths, dropped, tensions,
+                         forces)
 
 
 def _state(model: HandModel, truth) -> ParticleState:
     """One particle at the true configuration (`ParticleState.at_truth`)."""
     return ParticleState.at_truth(model, truth)
+
+
+def _start(motion: MotionModel, settle: MotionConfig, model: HandModel, rec: Recording,
+           k: int, start: str) -> ParticleState:
+    """The model's state before action k+1 (`GapSettings.start`): the true configuration
+    settled at u_k with glued contacts, or with each contact's stretch the sim's contact
+    force, relaxed at u_k (the command change's first step with no change)."""
+    st = _state(model, rec.truths[k])
+    if start == "sim-loads":
+        # The penalty's stretch times k_c is the force on the pad: minus the pad's on the object.
+        st.anchor_to_pose(model, (-rec.forces[k] / motion.config.contact_stiffness)[None])
+        motion.solve(st, rec.commands[k], u_from=rec.commands[k])
+    else:
+        motion.solve(st, rec.commands[k], settle)
+    return st
 
 
 def _angle_deg(r: np.ndarray) -> float:
@@ -267,8 +299,7 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
     rows, static = [], []
     for k in range(len(rec.commands) - 1):
         t0, t1 = rec.truths[k], rec.truths[k + 1]
-        st = _state(model, t0)
-        status, _ = motion.solve(st, rec.commands[k], settle)
+        st = _start(motion, settle, model, rec, k, settings.start)
         p0, r0 = _pose(st)
         t_model0 = motion.tensions(st, rec.commands[k])[0]
         v = (grasp_turn(st.pos, st.rot, st.anchors, thumb)[0] if thumb is not None
@@ -296,7 +327,7 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
         v = [r[key] for r in ok_rows if np.isfinite(r[key])]
         return float(fn(v)) if v else math.nan
 
-    drift = _drift(motion, settle, model, rec, settings.drift_actions)
+    drift = _drift(motion, settle, model, rec, settings.drift_actions, settings.start)
     s = np.array(static) if static else np.full((1, 3), math.nan)
     return {
         "terms": list(terms),
@@ -321,7 +352,7 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
 
 
 def _drift(motion: MotionModel, settle: MotionConfig, model: HandModel, rec: Recording,
-           n: int) -> dict:
+           n: int, start: str = "settle") -> dict:
     """Open-loop prediction of the first `n` actions from the first true state.
 
     Besides the drift, the per-action gap along that path (`open_loop_ratio_*`): each
@@ -329,8 +360,7 @@ def _drift(motion: MotionModel, settle: MotionConfig, model: HandModel, rec: Rec
     contacts' loads and places) from action to action as a filter's particle does, where
     the per-action gap restarts every action from the truth re-settled with glued contacts."""
     n = min(n, len(rec.commands) - 1)
-    st = _state(model, rec.truths[0])
-    motion.solve(st, rec.commands[0], settle)
+    st = _start(motion, settle, model, rec, 0, start)
     p0, r0 = _pose(st)
     total_p = total_r = 0.0
     ratios = []
@@ -386,6 +416,7 @@ def gap_report(settings: GapSettings,
         "exact_cylinder": settings.exact_cylinder,
         "limit_stiffness": settings.limit_stiffness,
         "contact_stiffness": settings.contact_stiffness,
+        "start": settings.start,
         "true_motion": {"position_mm_mean": float(np.mean(true_p)),
                         "orientation_deg_mean": float(np.mean(true_r))},
         "ratio_position_mean": full["ratio_position_mean"],
@@ -402,6 +433,8 @@ def format_report(rep: dict) -> str:
     head = (f"{rep['object']} ({rep['hand']}), seed {rep['seed']}: {rep['actions']} actions, "
             f"true motion {rep['true_motion']['position_mm_mean']:.2f} mm / "
             f"{rep['true_motion']['orientation_deg_mean']:.2f} deg per action"
+            + ("; each action from the sim's contact loads"
+               if rep.get("start") == "sim-loads" else "")
             + (f"; grasp lost at action {rep['grasp_lost_at']}" if rep["grasp_lost_at"] else ""))
     cols = f"{'model':28s} {'ratio pos':>10s} {'ratio ori':>10s} {'drift pos':>10s} " \
            f"{'drift ori':>10s} {'static mm':>10s} {'static deg':>10s} {'joint deg':>10s} " \
@@ -476,6 +509,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    metavar="K_LIM", help="the model's joint stops [N m/rad] (default "
                    f"{MotionConfig.limit_stiffness:g}; the sim's distal stops are about 18, "
                    "and vlr identify's sim default is 17)")
+    p.add_argument("--start", choices=STARTS, default="settle",
+                   help="where each prediction starts: the true configuration settled with "
+                   "glued contacts (default, the issue's measure), or with the sim's own "
+                   "contact loads as the contacts' stretch, relaxed (sim-loads)")
     p.add_argument("--json", help="write the report (per object, per model rung) as JSON")
     p.set_defaults(func=run)
 
@@ -502,7 +539,7 @@ def run(args: argparse.Namespace) -> int:
                                contact_stiffness=args.contact_stiffness,
                                spin_memory=args.spin_memory,
                                exact_cylinder=args.exact_cylinder,
-                               limit_stiffness=args.limit_stiffness)
+                               limit_stiffness=args.limit_stiffness, start=args.start)
         rep = gap_report(settings)
         print(format_report(rep) + "\n", flush=True)
         reports.append(rep)

@@ -100,6 +100,27 @@ def contact_summary(hand: SimHand) -> ContactSummary:
                           points=points)
 
 
+def pad_forces(hand: SimHand) -> np.ndarray:
+    """(fingers, 3) total contact force of each finger on the object, palm frame [N]: the
+    sim's contact loads (`vlr gap --start sim-loads`), zero for a finger off the object."""
+    m, d = hand.model, hand.data
+    r_palm = _palm_pose(hand)[1]
+    out, f6 = np.zeros((len(hand.slots), 3)), np.zeros(6)
+    for i in range(d.ncon):
+        c = d.contact[i]
+        b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
+        if hand._obj_body not in (b1, b2):
+            continue
+        slot = m.geom(c.geom2 if b1 == hand._obj_body else c.geom1).name.split("/")[0]
+        if slot not in hand.slots:
+            continue
+        mujoco.mj_contactForce(m, d, i, f6)
+        f_world = c.frame.reshape(3, 3).T @ f6[:3]  # MuJoCo's: on geom2, from geom1
+        out[hand.slots.index(slot)] += r_palm.T @ (-f_world if b1 == hand._obj_body
+                                                    else f_world)
+    return out
+
+
 def read_truth(hand: SimHand) -> GroundTruth:
     m, d = hand.model, hand.data
     p0, R0 = _palm_pose(hand)
