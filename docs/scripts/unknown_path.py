@@ -5,8 +5,9 @@ A one-off reader, not part of the package. For every finished trial of a sweep f
 reads `unknown_error_by_iteration` from the trial record (entry 0 is the grasp's update,
 entry n the error after n actions; SI units) and prints, per case and unknown, the error at
 each asked action count per seed, and the mean and sd over seeds. With `--median` it reads
-the posterior median's errors instead, and every joint's mean error [deg] as the unknown
-`joints` (trials recorded since session 28).
+the posterior median's errors instead, every joint's mean error [deg] as the unknown
+`joints` and the replaced proximal links' mean error [mm] as `proximal links [mm]`, the
+paper's figures (trials recorded since session 28).
 
     python docs/scripts/unknown_path.py runs/sweep-sim-60k-stiffness-40 [--at 15 20 30 40]
 """
@@ -33,6 +34,10 @@ def paths(out: Path, median: bool = False):
         if median:
             yield rec["case"], rec["settings"]["seed"], "joints", \
                 res["joint_median_deg_by_iteration"]
+            prox = [v for spec, v in res[key].items() if spec.endswith(".proximal")]
+            if prox:  # the paper's link figure: the replaced proximal links' mean [mm]
+                yield rec["case"], rec["settings"]["seed"], "proximal links [mm]", \
+                    list(np.mean(np.array(prox), axis=0) * 1e3)
 
 
 def main() -> None:
