@@ -6,7 +6,8 @@ simulator's configuration re-settled with glued contacts, so the contacts' loads
 model's own equilibrium, not the ones the sim's contacts carry from earlier actions. Here the
 model also starts from the sim's loads: each pad's contact force on the object (MuJoCo's
 `mj_contactForce`, palm frame) set as the contact penalty's stretch, -F / k_c, without a
-settle. Prints the per-action gap ratio, position / orientation, for both starts.
+settle (`vlr gap --start sim-loads` since session 28 does it with a relax). Prints the
+per-action gap ratio, position / orientation, for both starts.
 
     MUJOCO_GL=egl python docs/scripts/true_loads_probe.py [OBJECT] [ACTIONS] [friction]
 """
@@ -14,35 +15,15 @@ settle. Prints the per-action gap ratio, position / orientation, for both starts
 import sys
 from dataclasses import replace
 
-import mujoco
 import numpy as np
 
 from sim.backend import SimHand
 from sim.gap import _ALL, GapSettings, _motion_error, _state
 from sim.pads import SLIDE_FRICTION, TORSION_FRICTION
+from sim.truth import pad_forces
 from vlr.explore import ExplorationRange, random_action
 from vlr.kinematics import HandModel
 from vlr.motion import MotionConfig, MotionModel, ObjectParams
-
-
-def pad_forces(hand: SimHand) -> np.ndarray:
-    """(fingers, 3) total contact force of each finger on the object, palm frame [N]."""
-    m, d = hand.model, hand.data
-    r_palm = d.xmat[m.body("palm").id].reshape(3, 3)
-    out, f6 = np.zeros((len(hand.slots), 3)), np.zeros(6)
-    for i in range(d.ncon):
-        c = d.contact[i]
-        b1, b2 = m.geom_bodyid[c.geom1], m.geom_bodyid[c.geom2]
-        if hand._obj_body not in (b1, b2):
-            continue
-        slot = m.geom(c.geom2 if b1 == hand._obj_body else c.geom1).name.split("/")[0]
-        if slot not in hand.slots:
-            continue
-        mujoco.mj_contactForce(m, d, i, f6)
-        f_world = c.frame.reshape(3, 3).T @ f6[:3]      # on geom2, from geom1
-        out[hand.slots.index(slot)] += r_palm.T @ (-f_world if b1 == hand._obj_body
-                                                    else f_world)
-    return out
 
 
 def main() -> None:
