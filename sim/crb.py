@@ -18,7 +18,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -110,6 +110,14 @@ def replay_commands(record: dict, where: str) -> tuple[TrialSettings,
         u = np.empty(0)
     if u.ndim != 2 or not np.isfinite(u).all():
         raise UserError(f"{where}: commands_mm_by_iteration must be rows of finite numbers")
+    if settings.get("limit_stiffness") is None:
+        # Replay at the joint stops the trial ran with: its record says since session 28;
+        # before, every backend's were the model's 100 (the sim's default is now 17).
+        from vlr.motion import MotionConfig
+
+        ran = result.get("limit_stiffness")
+        settings = {**settings, "limit_stiffness": float(ran) if ran is not None
+                    else MotionConfig.limit_stiffness}
     return TrialSettings.from_dict(settings), tuple(map(tuple, u * 1e-3))
 
 
@@ -357,8 +365,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--slide-friction", type=float, default=None, metavar="MU",
                    help="the filter model's pads' sliding friction (as vlr identify)")
     p.add_argument("--limit-stiffness", type=float, default=None, metavar="K_LIM",
-                   help="the model's joint stops [N m/rad] (default: vlr identify's, the "
-                   "sim's 17 since session 28; 100 before)")
+                   help="the model's joint stops [N m/rad] (default: a --sweep file's or a "
+                   "--replay record's own, else vlr identify's: the sim's 17 since session "
+                   "28, 100 before)")
     p.add_argument("--spin-friction", type=float, default=0.0, metavar="MU_T",
                    help="the filter model's pads' torsional friction [m] (as vlr identify)")
     p.add_argument("--relative-step", type=float, default=0.02,
@@ -368,14 +377,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _trials(args: argparse.Namespace) -> list[tuple[str, TrialSettings]]:
-    from dataclasses import replace
-
     from vlr.sweep import expand, load_sweep
 
     if args.actions < 1:
         raise UserError(f"--actions {args.actions} must be >= 1")
     if args.sweep:
-        return [(t.case, replace(t.settings, particles=1000))
+        return [(t.case, replace(t.settings, particles=1000,
+                                 **_stops(args.limit_stiffness)))
                 for t in expand(load_sweep(args.sweep))]
     return [("trial", TrialSettings(
         backend="sim", object=args.object, hand=args.hand, true_hand=args.true_hand,
@@ -393,7 +401,6 @@ def _trials(args: argparse.Namespace) -> list[tuple[str, TrialSettings]]:
 def _replays(paths: list[str]) -> list[tuple[str, TrialSettings, tuple]]:
     """(case, settings, commands) of each trial file (`replay_commands`)."""
     import json
-    from dataclasses import replace
     from pathlib import Path
 
     out = []
@@ -411,6 +418,11 @@ def _replays(paths: list[str]) -> list[tuple[str, TrialSettings, tuple]]:
     return out
 
 
+def _stops(limit_stiffness: float | None) -> dict:
+    """`--limit-stiffness` as a settings override (none given: the file's own)."""
+    return {} if limit_stiffness is None else {"limit_stiffness": limit_stiffness}
+
+
 def _main(args: argparse.Namespace) -> int:
     from pathlib import Path
 
@@ -421,7 +433,8 @@ def _main(args: argparse.Namespace) -> int:
     if args.replay:
         if args.sweep:
             raise UserError("give --sweep or --replay, not both")
-        settings = [(case, CrbSettings(trial=t, candidates=args.candidates,
+        settings = [(case, CrbSettings(trial=replace(t, **_stops(args.limit_stiffness)),
+                                       candidates=args.candidates,
                                        relative_step=args.relative_step, replay=u))
                     for case, t, u in _replays(args.replay)]
     else:

@@ -251,3 +251,20 @@ def test_replaying_a_trials_actions_gives_its_floor(tmp_path, capsys):
     record.write_text(json.dumps(bad))
     assert main(["crb", "--replay", str(record)]) == 2
     assert "commands" in capsys.readouterr().err
+
+
+def test_a_replay_keeps_the_joint_stops_its_trial_ran_with():
+    """The sim's default stops changed from 100 to 17 N m/rad in session 28: a record that
+    leaves them unset replays at what its result says it ran with, or at 100 before that."""
+    from sim.crb import replay_commands
+
+    settings = TrialSettings(backend="sim", seed=1).to_dict()
+    cmds = [[1.0, 2.0, 3.0], [1.1, 2.0, 3.0]]
+    old = {"settings": settings, "result": {"commands_mm_by_iteration": cmds}}
+    assert replay_commands(old, "old")[0].limit_stiffness == 100.0
+    new = {"settings": settings, "result": {"commands_mm_by_iteration": cmds,
+                                            "limit_stiffness": 17.0}}
+    assert replay_commands(new, "new")[0].limit_stiffness == 17.0
+    pinned = {"settings": {**settings, "limit_stiffness": 40.0},
+              "result": {"commands_mm_by_iteration": cmds, "limit_stiffness": 40.0}}
+    assert replay_commands(pinned, "pinned")[0].limit_stiffness == 40.0

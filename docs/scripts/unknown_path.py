@@ -27,14 +27,15 @@ def paths(out: Path, median: bool = False):
             continue
         res = rec["result"]
         key = "unknown_error_median_by_iteration" if median else "unknown_error_by_iteration"
-        if median and key not in res:
-            raise SystemExit(f"{f} has no {key}: recorded before session 28")
-        for spec, errs in (res.get(key) or {}).items():
+        if median and "joint_median_deg_by_iteration" not in res:
+            raise SystemExit(f"{f} has no posterior-median path: recorded before session 28")
+        by_it = res.get(key) or {}   # none for a trial without unknowns
+        for spec, errs in by_it.items():
             yield rec["case"], rec["settings"]["seed"], spec, errs
         if median:
             yield rec["case"], rec["settings"]["seed"], "joints", \
                 res["joint_median_deg_by_iteration"]
-            prox = [v for spec, v in res[key].items() if spec.endswith(".proximal")]
+            prox = [v for spec, v in by_it.items() if spec.endswith(".proximal")]
             if prox:  # the paper's link figure: the replaced proximal links' mean [mm]
                 yield rec["case"], rec["settings"]["seed"], "proximal links [mm]", \
                     list(np.mean(np.array(prox), axis=0) * 1e3)
