@@ -12,15 +12,20 @@ the grip; z: up) and the gain of the predicted turn about the grasp's axis
 
     MUJOCO_GL=egl python docs/scripts/gap_sim_settings.py [--objects apple,...] [--seeds 0]
         [--ramp-time 0.05 0.2] [--noslip 10 50] [--spin-friction 0.001]
+        [--settle-spin 0.001 --settle-time 4]
 
 `--ramp-time` [s] is `SimOptions.ramp_time` (how fast a command change is made),
 `--noslip` MuJoCo's noslip iterations (`sim.model.NOSLIP_ITERATIONS`), `--spin-friction` the
-model's torsional friction coefficient [m] in the friction rung.
+model's torsional friction coefficient [m] in the friction rung. `--settle-spin` [rad/s]
+(session 29) makes the sim's settle also wait for the object's angular speed to fall under
+it, which `SimHand._settle` does not check, for up to `--settle-time` [s] (the default 2).
 """
 
 import argparse
+import types
 from dataclasses import replace
 
+import mujoco
 import numpy as np
 
 import sim.model as sim_model
@@ -32,11 +37,31 @@ from vlr.motion import MotionConfig, MotionModel, ObjectParams, ParticleState
 from vlr.observation import grasp_turn, rotation_error
 
 
-def record(obj: str, seed: int, ramp_time: float, actions: int = 30) -> tuple[Recording, int]:
-    """`sim.gap.record_actions` with a ramp time; also counts the settles that timed out."""
+def _settle_with_spin(hand: SimHand, spin: float) -> bool:
+    """`SimHand._settle`, also waiting for the object's angular speed under `spin` [rad/s]."""
+    opts, m, d = hand.options, hand.model, hand.data
+    quiet, o = 0, hand._obj_dof
+    for _ in range(int(opts.settle_time_max / m.opt.timestep)):
+        mujoco.mj_step(m, d)
+        quiet = quiet + 1 if (np.abs(d.qvel[hand._dadr]).max() < opts.settle_qvel
+                              and np.abs(d.qvel[o:o + 3]).max() < opts.settle_objvel
+                              and np.abs(d.qvel[o + 3:o + 6]).max() < spin) else 0
+        if quiet >= opts.settle_window:
+            return True
+    return False
+
+
+def record(obj: str, seed: int, ramp_time: float, actions: int = 30,
+           settle_spin: float | None = None,
+           settle_time: float = SimOptions.settle_time_max) -> tuple[Recording, int]:
+    """`sim.gap.record_actions` with a ramp time (and a settle that waits for the object's
+    spin, if given); also counts the settles that timed out."""
     s = GapSettings(object=obj, seed=seed, actions=actions)
-    options = SimOptions(width=64, height=48, ramp_time=ramp_time)   # no frames needed
+    options = SimOptions(width=64, height=48, ramp_time=ramp_time,   # no frames needed
+                         settle_time_max=settle_time)
     with SimHand(object=obj, seed=seed, options=options) as hand:
+        if settle_spin is not None:
+            hand._settle = types.MethodType(lambda h: _settle_with_spin(h, settle_spin), hand)
         grasp = hand.grasp()
         commands, tensions, truths = [grasp.commands], [grasp.tensions], [hand.scoring_truth()]
         rng = np.random.default_rng(seed + 1)                  # vlr gap's action stream
@@ -98,6 +123,8 @@ def main() -> None:
     ap.add_argument("--ramp-time", type=float, nargs="+", default=[0.05])
     ap.add_argument("--noslip", type=int, nargs="+", default=[sim_model.NOSLIP_ITERATIONS])
     ap.add_argument("--spin-friction", type=float, default=0.001)
+    ap.add_argument("--settle-spin", type=float, default=None)
+    ap.add_argument("--settle-time", type=float, default=SimOptions.settle_time_max)
     args = ap.parse_args()
     base = MotionConfig(terms=_ALL)
     rungs = (("rolling", base), ("cone return", replace(base, cone_return=1.0)),
@@ -109,7 +136,8 @@ def main() -> None:
             for noslip in args.noslip:
                 sim_model.NOSLIP_ITERATIONS = noslip     # read when the scene is built
                 for ramp in args.ramp_time:
-                    rec, unsettled = record(obj, seed, ramp)
+                    rec, unsettled = record(obj, seed, ramp, settle_spin=args.settle_spin,
+                                             settle_time=args.settle_time)
                     cells = []
                     for name, cfg in rungs:
                         m = measure(rec, cfg)

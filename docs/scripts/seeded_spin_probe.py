@@ -12,13 +12,20 @@ re-settled (glued, as `vlr gap` does), in two arms:
 * `loads`, `loads + sim`: no settle; each pad's stretch is the sim's contact force on the
   object (`true_loads_probe.py`, session 10), the spin torques zero or the sim's.
 
+`--smoothing EPS ...` (session 29) runs the `loads` and `loads + sim` arms with the spin
+friction's curve rounded over EPS [rad] (`MotionConfig.spin_smoothing`, 1 mrad by default):
+the pad's stick made as compliant in torsion as EPS makes it (tangent stiffness mu_t N /
+EPS), against the sim's soft torsional friction.
+
 Both arms first relax at the old command (the command change's first step) and measure the
 action's motion from there, so the seeded torques' own rebalancing is not counted as the
 action's. Sim ground truth: this is scoring, never the estimator.
 
     MUJOCO_GL=egl python docs/scripts/seeded_spin_probe.py 0
+    MUJOCO_GL=egl python docs/scripts/seeded_spin_probe.py 0 --smoothing 0.001 0.002 0.003 0.005
 """
 
+import argparse
 import math
 import sys
 from dataclasses import replace
@@ -48,9 +55,11 @@ def record(obj: str, seed: int, actions: int = 30):
 ARMS = ("zero", "sim", "loads", "loads + sim")
 
 
-def ratios(spec, obj_spec, commands, truths, torques, forces, arm: str) -> list[float]:
+def ratios(spec, obj_spec, commands, truths, torques, forces, arm: str,
+           smoothing: float = MEMORY.spin_smoothing) -> list[float]:
     model = HandModel.from_spec(spec)
-    mm = MotionModel(model, ObjectParams.from_spec(obj_spec), MEMORY)
+    mm = MotionModel(model, ObjectParams.from_spec(obj_spec),
+                     replace(MEMORY, spin_smoothing=smoothing))
     out = []
     for k in range(len(commands) - 1):
         t0, t1 = truths[k], truths[k + 1]
@@ -72,14 +81,22 @@ def ratios(spec, obj_spec, commands, truths, torques, forces, arm: str) -> list[
     return out
 
 
-def main(seed: int) -> None:
+def main(seed: int, smoothing: list[float] | None = None) -> None:
     for obj in OBJECTS:
         rec = record(obj, seed)
-        r = {arm: ratios(*rec, arm=arm) for arm in ARMS}
+        if smoothing:
+            r = {f"{arm}, {eps * 1e3:g} mrad": ratios(*rec, arm=arm, smoothing=eps)
+                 for eps in smoothing for arm in ("loads", "loads + sim")}
+        else:
+            r = {arm: ratios(*rec, arm=arm) for arm in ARMS}
         print(f"{obj:17s} seed {seed}: orientation ratio mean (median; solves) "
               + ", ".join(f"{arm} {np.nanmean(v):.3f} ({np.nanmedian(v):.3f}; {len(v)})"
                           for arm, v in r.items()), flush=True)
 
 
 if __name__ == "__main__":
-    main(int(sys.argv[1]) if len(sys.argv) > 1 else 0)
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("seed", type=int, nargs="?", default=0)
+    ap.add_argument("--smoothing", type=float, nargs="+", default=None)
+    a = ap.parse_args()
+    main(a.seed, a.smoothing)

@@ -7,9 +7,13 @@ entry n the error after n actions; SI units) and prints, per case and unknown, t
 each asked action count per seed, and the mean and sd over seeds. With `--median` it reads
 the posterior median's errors instead, every joint's mean error [deg] as the unknown
 `joints` and the replaced proximal links' mean error [mm] as `proximal links [mm]`, the
-paper's figures (trials recorded since session 28).
+paper's figures (trials recorded since session 28). Several sweep folders pool their seeds
+per case (session 29: seeds 0-4 of one sweep and held-out seeds 5-9 of another, the same
+cases); a seed found twice is an error.
 
     python docs/scripts/unknown_path.py runs/sweep-sim-60k-stiffness-40 [--at 15 20 30 40]
+    python docs/scripts/unknown_path.py runs/sweep-sim-60k-surface-stops-40 \
+        runs/sweep-sim-60k-surface-stops-40-heldout --median --at 20 30 40
 """
 
 import argparse
@@ -43,20 +47,25 @@ def paths(out: Path, median: bool = False):
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("out", type=Path, help="a sweep's output folder")
+    ap.add_argument("out", type=Path, nargs="+", help="sweep output folders (seeds pooled)")
     ap.add_argument("--at", type=int, nargs="+", default=[15, 20, 30, 40],
                     help="action counts (default 15 20 30 40)")
     ap.add_argument("--median", action="store_true",
                     help="the posterior median's errors, and every joint's mean error [deg]")
     args = ap.parse_args()
-    if not (args.out / "trials").is_dir():
-        ap.error(f"{str(args.out)!r} has no trials/ folder: not a sweep's output folder")
+    for out in args.out:
+        if not (out / "trials").is_dir():
+            ap.error(f"{str(out)!r} has no trials/ folder: not a sweep's output folder")
     groups: dict[tuple[str, str], dict[int, list[float]]] = {}
-    for case, seed, spec, errs in paths(args.out, args.median):
-        row = [errs[n] if n < len(errs) else float("nan") for n in args.at]
-        print(f"{case} | {spec} | seed {seed} | "
-              + " ".join(f"{n}: {e:.4g}" for n, e in zip(args.at, row, strict=True)))
-        groups.setdefault((case, spec), {})[seed] = row
+    for out in args.out:
+        for case, seed, spec, errs in paths(out, args.median):
+            row = [errs[n] if n < len(errs) else float("nan") for n in args.at]
+            print(f"{case} | {spec} | seed {seed} | "
+                  + " ".join(f"{n}: {e:.4g}" for n, e in zip(args.at, row, strict=True)))
+            seeds = groups.setdefault((case, spec), {})
+            if seed in seeds:
+                ap.error(f"{case!r} seed {seed} is in more than one folder ({out})")
+            seeds[seed] = row
     for (case, spec), seeds in groups.items():
         a = np.array(list(seeds.values()))
         print(f"{case} | {spec} | {len(seeds)} seeds | " + " ".join(
