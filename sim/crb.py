@@ -116,6 +116,8 @@ def replay_commands(record: dict, where: str) -> tuple[TrialSettings,
         from vlr.motion import MotionConfig
 
         ran = result.get("limit_stiffness")
+        if ran is not None and not isinstance(ran, int | float):
+            raise UserError(f"{where}: result limit_stiffness {ran!r} is not a number")
         settings = {**settings, "limit_stiffness": float(ran) if ran is not None
                     else MotionConfig.limit_stiffness}
     return TrialSettings.from_dict(settings), tuple(map(tuple, u * 1e-3))

@@ -268,3 +268,7 @@ def test_a_replay_keeps_the_joint_stops_its_trial_ran_with():
     pinned = {"settings": {**settings, "limit_stiffness": 40.0},
               "result": {"commands_mm_by_iteration": cmds, "limit_stiffness": 40.0}}
     assert replay_commands(pinned, "pinned")[0].limit_stiffness == 40.0
+    garbled = {"settings": settings, "result": {"commands_mm_by_iteration": cmds,
+                                                "limit_stiffness": "soft"}}
+    with pytest.raises(UserError, match="'soft'"):
+        replay_commands(garbled, "garbled")

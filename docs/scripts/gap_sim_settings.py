@@ -126,6 +126,10 @@ def main() -> None:
     ap.add_argument("--settle-spin", type=float, default=None)
     ap.add_argument("--settle-time", type=float, default=SimOptions.settle_time_max)
     args = ap.parse_args()
+    if args.settle_spin is not None and not args.settle_spin > 0:
+        ap.error(f"--settle-spin {args.settle_spin}: an angular speed [rad/s] must be > 0")
+    if not args.settle_time > 0:
+        ap.error(f"--settle-time {args.settle_time}: a time [s] must be > 0")
     base = MotionConfig(terms=_ALL)
     rungs = (("rolling", base), ("cone return", replace(base, cone_return=1.0)),
              ("friction", replace(base, slide_friction=1.0, spin_friction=args.spin_friction)))

@@ -99,4 +99,6 @@ if __name__ == "__main__":
     ap.add_argument("seed", type=int, nargs="?", default=0)
     ap.add_argument("--smoothing", type=float, nargs="+", default=None)
     a = ap.parse_args()
+    if a.smoothing and not all(eps > 0 for eps in a.smoothing):
+        ap.error(f"--smoothing {a.smoothing}: each rounding [rad] must be > 0")
     main(a.seed, a.smoothing)
