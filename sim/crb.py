@@ -120,6 +120,13 @@ def replay_commands(record: dict, where: str) -> tuple[TrialSettings,
             raise UserError(f"{where}: result limit_stiffness {ran!r} is not a number")
         settings = {**settings, "limit_stiffness": float(ran) if ran is not None
                     else MotionConfig.limit_stiffness}
+    if settings.get("backend") == "sim" and settings.get("ramp_time") is None:
+        # Replay in the sim the trial ran in: its record says since session 30; before,
+        # the sim ramped every command change over 50 ms (vlr identify's default is now 0.1).
+        ran = result.get("ramp_time", 0.05)
+        if not isinstance(ran, int | float) or isinstance(ran, bool):
+            raise UserError(f"{where}: result ramp_time {ran!r} is not a number")
+        settings = {**settings, "ramp_time": float(ran)}
     return TrialSettings.from_dict(settings), tuple(map(tuple, u * 1e-3))
 
 
@@ -372,6 +379,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "28, 100 before)")
     p.add_argument("--spin-friction", type=float, default=0.0, metavar="MU_T",
                    help="the filter model's pads' torsional friction [m] (as vlr identify)")
+    p.add_argument("--ramp-time", type=float, default=None, metavar="S",
+                   help="how long the sim takes to make each command change [s] (default: "
+                   "a --sweep file's or a --replay record's own, else vlr identify's: 0.1 "
+                   "since session 30, 0.05 before)")
     p.add_argument("--relative-step", type=float, default=0.02,
                    help="finite-difference step over each prior spread (default 0.02)")
     p.add_argument("--json", default=None, metavar="FILE", help="write the report as JSON")
@@ -385,7 +396,7 @@ def _trials(args: argparse.Namespace) -> list[tuple[str, TrialSettings]]:
         raise UserError(f"--actions {args.actions} must be >= 1")
     if args.sweep:
         return [(t.case, replace(t.settings, particles=1000,
-                                 **_stops(args.limit_stiffness)))
+                                 **_stops(args.limit_stiffness, args.ramp_time)))
                 for t in expand(load_sweep(args.sweep))]
     return [("trial", TrialSettings(
         backend="sim", object=args.object, hand=args.hand, true_hand=args.true_hand,
@@ -397,7 +408,8 @@ def _trials(args: argparse.Namespace) -> list[tuple[str, TrialSettings]]:
         prior_spread_deg=args.prior_spread_deg, contact_spread_deg=args.contact_spread_deg,
         slide_friction=args.slide_friction,
         spin_friction=args.spin_friction, action_range_mm=args.action_range_mm,
-        action_band_mm=args.action_band_mm, limit_stiffness=args.limit_stiffness))]
+        action_band_mm=args.action_band_mm, limit_stiffness=args.limit_stiffness,
+        ramp_time=args.ramp_time))]
 
 
 def _replays(paths: list[str]) -> list[tuple[str, TrialSettings, tuple]]:
@@ -420,9 +432,11 @@ def _replays(paths: list[str]) -> list[tuple[str, TrialSettings, tuple]]:
     return out
 
 
-def _stops(limit_stiffness: float | None) -> dict:
-    """`--limit-stiffness` as a settings override (none given: the file's own)."""
-    return {} if limit_stiffness is None else {"limit_stiffness": limit_stiffness}
+def _stops(limit_stiffness: float | None, ramp_time: float | None = None) -> dict:
+    """`--limit-stiffness` and `--ramp-time` as settings overrides (none given: the file's
+    or the record's own)."""
+    out = {} if limit_stiffness is None else {"limit_stiffness": limit_stiffness}
+    return out if ramp_time is None else {**out, "ramp_time": ramp_time}
 
 
 def _main(args: argparse.Namespace) -> int:
@@ -435,7 +449,8 @@ def _main(args: argparse.Namespace) -> int:
     if args.replay:
         if args.sweep:
             raise UserError("give --sweep or --replay, not both")
-        settings = [(case, CrbSettings(trial=replace(t, **_stops(args.limit_stiffness)),
+        settings = [(case, CrbSettings(trial=replace(t, **_stops(args.limit_stiffness,
+                                                                   args.ramp_time)),
                                        candidates=args.candidates,
                                        relative_step=args.relative_step, replay=u))
                     for case, t, u in _replays(args.replay)]

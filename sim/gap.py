@@ -93,6 +93,10 @@ class GapSettings:
             the sim's are about 120 at the proximal joints and 18 at the distal ones, since
             MuJoCo scales a limit's stiffness with the link's inertia).
         start: where each prediction starts (module docstring): "settle" or "sim-loads".
+        ramp_time: how long the sim takes to make each command change [s]
+            (`sim.backend.SimOptions.ramp_time`). 0.05, the setting of every committed gap
+            report; `vlr identify`'s sim trials move over 0.1 s (`vlr.trial.RAMP_TIME_DEFAULT`,
+            the hardware backend's default move).
     """
 
     object: str = "apple"
@@ -111,8 +115,12 @@ class GapSettings:
     exact_cylinder: bool = False
     limit_stiffness: float = MotionConfig.limit_stiffness
     start: str = "settle"
+    ramp_time: float = 0.05
 
     def __post_init__(self) -> None:
+        if not (isinstance(self.ramp_time, (int, float)) and math.isfinite(self.ramp_time)
+                and 0 < self.ramp_time <= 2.0):
+            raise UserError(f"ramp time {self.ramp_time!r} s must be in (0, 2]")
         if self.start not in STARTS:
             raise UserError(f"start {self.start!r}: expected one of {', '.join(STARTS)}")
         if not (np.isfinite(self.contact_stiffness) and self.contact_stiffness > 0):
@@ -163,10 +171,12 @@ def record_actions(settings: GapSettings) -> Recording:
     """Grasp in the simulator and make the random actions, recording the truth after each.
 
     Stops early if the fingertip grasp is lost (`dropped_at`: the action that lost it)."""
-    from sim.backend import SimHand
+    from sim.backend import SimHand, SimOptions
     from sim.truth import pad_forces
 
-    with SimHand(object=settings.object, hand=settings.hand, seed=settings.seed) as hand:
+    options = SimOptions(ramp_time=settings.ramp_time)
+    with SimHand(object=settings.object, hand=settings.hand, seed=settings.seed,
+                 options=options) as hand:
         grasp = hand.grasp()
         commands, tensions = [grasp.commands], [grasp.tensions]
         truths, forces = [hand.scoring_truth()], [pad_forces(hand)]
@@ -417,6 +427,7 @@ def gap_report(settings: GapSettings,
         "limit_stiffness": settings.limit_stiffness,
         "contact_stiffness": settings.contact_stiffness,
         "start": settings.start,
+        "ramp_time": settings.ramp_time,
         "true_motion": {"position_mm_mean": float(np.mean(true_p)),
                         "orientation_deg_mean": float(np.mean(true_r))},
         "ratio_position_mean": full["ratio_position_mean"],
@@ -435,6 +446,8 @@ def format_report(rep: dict) -> str:
             f"{rep['true_motion']['orientation_deg_mean']:.2f} deg per action"
             + ("; each action from the sim's contact loads"
                if rep.get("start") == "sim-loads" else "")
+            + (f"; the sim's commands ramped over {rep['ramp_time']:g} s"
+               if rep.get("ramp_time", 0.05) != 0.05 else "")
             + (f"; grasp lost at action {rep['grasp_lost_at']}" if rep["grasp_lost_at"] else ""))
     cols = f"{'model':28s} {'ratio pos':>10s} {'ratio ori':>10s} {'drift pos':>10s} " \
            f"{'drift ori':>10s} {'static mm':>10s} {'static deg':>10s} {'joint deg':>10s} " \
@@ -513,6 +526,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="where each prediction starts: the true configuration settled with "
                    "glued contacts (default, the issue's measure), or with the sim's own "
                    "contact loads as the contacts' stretch, relaxed (sim-loads)")
+    p.add_argument("--ramp-time", type=float, default=GapSettings.ramp_time, metavar="S",
+                   help="how long the sim takes to make each command change [s] (default "
+                   f"{GapSettings.ramp_time:g}, that of the committed reports; vlr identify's "
+                   "sim trials move over 0.1 s, the hardware backend's default move)")
     p.add_argument("--json", help="write the report (per object, per model rung) as JSON")
     p.set_defaults(func=run)
 
@@ -539,7 +556,8 @@ def run(args: argparse.Namespace) -> int:
                                contact_stiffness=args.contact_stiffness,
                                spin_memory=args.spin_memory,
                                exact_cylinder=args.exact_cylinder,
-                               limit_stiffness=args.limit_stiffness, start=args.start)
+                               limit_stiffness=args.limit_stiffness, start=args.start,
+                               ramp_time=args.ramp_time)
         rep = gap_report(settings)
         print(format_report(rep) + "\n", flush=True)
         reports.append(rep)

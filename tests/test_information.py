@@ -272,3 +272,21 @@ def test_a_replay_keeps_the_joint_stops_its_trial_ran_with():
                                                 "limit_stiffness": "soft"}}
     with pytest.raises(UserError, match="'soft'"):
         replay_commands(garbled, "garbled")
+
+
+def test_a_replay_keeps_the_sims_ramp_its_trial_ran_with():
+    """The sim's trials ramp each command change over 0.1 s since session 30, 50 ms before:
+    a record that leaves it unset replays at what its result says, or at 0.05."""
+    from sim.crb import replay_commands
+
+    settings = TrialSettings(backend="sim", seed=1).to_dict()
+    cmds = [[1.0, 2.0, 3.0], [1.1, 2.0, 3.0]]
+    old = {"settings": settings, "result": {"commands_mm_by_iteration": cmds}}
+    assert replay_commands(old, "old")[0].ramp_time_in_effect == 0.05
+    new = {"settings": settings, "result": {"commands_mm_by_iteration": cmds,
+                                            "ramp_time": 0.1}}
+    assert replay_commands(new, "new")[0].ramp_time_in_effect == 0.1
+    garbled = {"settings": settings, "result": {"commands_mm_by_iteration": cmds,
+                                                "ramp_time": "slow"}}
+    with pytest.raises(UserError, match="'slow'"):
+        replay_commands(garbled, "garbled")

@@ -139,6 +139,27 @@ def test_joint_stops_follow_the_backend_and_an_explicit_one_wins():
                          limit_stiffness=100.0).motion_config().limit_stiffness == 100.0
 
 
+def test_the_sim_moves_as_the_hardware_backend_does_and_an_explicit_ramp_wins():
+    """The sim's trials ramp each command change over the hardware backend's default move
+    (docs/RESULTS.md 5, session 30); a trial may say otherwise, on the sim only."""
+    from hardware.config import MotionConfig as HardwareMotion
+
+    hw = HardwareMotion(spool_radius=0.005, max_step=1e-3, range=(0.0, 0.01))
+    assert TrialSettings(backend="sim").ramp_time_in_effect == pytest.approx(
+        hw.ramp_steps * hw.ramp_period)
+    assert TrialSettings(backend="sim", ramp_time=0.05).ramp_time_in_effect == 0.05
+    assert TrialSettings(backend="synthetic").ramp_time_in_effect is None
+    w = open_world(TrialSettings(backend="sim", particles=100, ramp_time=0.07))
+    try:
+        assert w.world.options.ramp_time == 0.07
+    finally:
+        w.close()
+    for bad in (dict(backend="synthetic", ramp_time=0.1), dict(backend="sim", ramp_time=0.0),
+                dict(backend="sim", ramp_time=5.0), dict(backend="sim", ramp_time="slow")):
+        with pytest.raises(UserError, match="ramp_time"):
+            TrialSettings(**bad)
+
+
 def test_the_grasp_guess_follows_the_backend_and_an_explicit_one_wins():
     """The sim's default guess is the one its identification rows use (-10, 15) +- 10
     degrees (the generic guess identified the sim apple 12 degrees off); the synthetic world

@@ -65,6 +65,14 @@ ROLLING_TURN_SIGMA = {"sim": (0.2, 0.4, 1.0)}
 # 5, session 27). The real hand's stops are hard plastic of unknown stiffness: it keeps 100.
 LIMIT_STIFFNESS_DEFAULT = {"sim": 17.0}
 
+# How long the sim takes to make each command change [s] (`sim.backend.SimOptions.ramp_time`),
+# when a trial does not say (`ramp_time`): the hardware backend's default move, 5 goal
+# positions 20 ms apart (`hardware.config.MotionSettings`), so that the sim moves as the real
+# hand is moved. At SimOptions' 50 ms the fingers, whose springs and damping settle in about
+# as long, lag the command, and a contact can slide where the quasi-static model rolls: the
+# gelatin box's seed-2 action 3 (`vlr gap --ramp-time`, docs/RESULTS.md 5, session 30).
+RAMP_TIME_DEFAULT = {"sim": 0.1}
+
 # Synthetic world: an unknown spring whose true rate is not given is drawn from this range of
 # its nominal rate, with the trial's seed (a replaced spring is not the nominal one).
 TRUE_STIFFNESS_RANGE = (0.5, 2.0)
@@ -184,6 +192,9 @@ class TrialSettings:
         limit_stiffness: the motion model's joint stops [N m/rad]
             (`vlr.motion.MotionConfig`); None: the backend's default
             (`LIMIT_STIFFNESS_DEFAULT`, the sim's 17), else the model's 100.
+        ramp_time: sim only: how long the sim takes to make each command change [s]
+            (`sim.backend.SimOptions.ramp_time`); None: `RAMP_TIME_DEFAULT` (0.1 s, the
+            hardware backend's default move).
         cone_return: with rolling, the sliding friction coefficient of the return map
             between solves (`vlr.motion.MotionConfig.cone_return`); None: off. Not with
             slide_friction or spin_friction (the friction in the energy already slides).
@@ -234,6 +245,7 @@ class TrialSettings:
     anneal_stages: int = 1
     contact_stiffness: float | None = None
     limit_stiffness: float | None = None
+    ramp_time: float | None = None
     cone_return: float | None = None
     link_scaling: bool = False
     jitter_h: float | None = None
@@ -272,6 +284,13 @@ class TrialSettings:
         if self.tension_noise_n and self.backend != "sim":
             raise UserError(f"tension_noise_n is the sim's: the {self.backend} hand's "
                             "tensions are what they are: set it to 0")
+        if self.ramp_time is not None:
+            if self.backend != "sim":
+                raise UserError(f"ramp_time is the sim's: the {self.backend} hand moves as its "
+                                "backend does (hardware: motion.ramp_steps x ramp_period): "
+                                "leave it out")
+            if not (math.isfinite(self.ramp_time) and 0 < self.ramp_time <= 2.0):
+                raise UserError(f"ramp_time {self.ramp_time} s must be in (0, 2]")
         if self.sigma_turn_deg and self.sigma_motion > 0:
             raise UserError("sigma_turn_deg and sigma_motion model the same error: set one")
         if self.true_stiffness and self.backend != "synthetic":
@@ -350,7 +369,7 @@ class TrialSettings:
                      "sigma_turn_deg", "sigma_tension_n", "tension_noise_n",
                      "slide_friction", "spin_friction", "active_model_error",
                      "active_min_force_n",
-                     "contact_stiffness", "limit_stiffness", "cone_return"):
+                     "contact_stiffness", "limit_stiffness", "ramp_time", "cone_return"):
             v = getattr(self, name)
             if not (is_real(v) or (v is None and name in ("sigma_pos_mm", "sigma_rot_deg",
                                                           "sigma_turn_deg",
@@ -359,6 +378,7 @@ class TrialSettings:
                                                           "slide_friction",
                                                           "contact_stiffness",
                                                           "limit_stiffness",
+                                                          "ramp_time",
                                                           "cone_return"))):
                 raise bad(name, "a number")
         if self.noise_prior is not None:
@@ -489,6 +509,14 @@ class TrialSettings:
         return LIMIT_STIFFNESS_DEFAULT.get(self.backend, MotionConfig.limit_stiffness)
 
     @property
+    def ramp_time_in_effect(self) -> float | None:
+        """The sim's ramp per command change [s] in effect: `ramp_time`, or the backend's
+        default (`RAMP_TIME_DEFAULT`); None for a backend that is not the sim."""
+        if self.ramp_time is not None:
+            return float(self.ramp_time)
+        return RAMP_TIME_DEFAULT.get(self.backend)
+
+    @property
     def uses_rolling(self) -> bool:
         """Rolling contacts in effect: `rolling`, or the backend's default."""
         if self.rolling is not None:
@@ -596,6 +624,8 @@ def open_world(settings: TrialSettings) -> World:
     options = {"config": settings.config} if settings.config else {}
     if settings.tension_noise_n:
         options["tension_noise_n"] = settings.tension_noise_n
+    if settings.ramp_time_in_effect is not None:
+        options["ramp_time"] = settings.ramp_time_in_effect
     # The sim may be built with another hand than the filter's (true_hand: replaced fingers
     # or springs that the filter identifies as unknowns); the filter keeps `hand_spec`.
     hand = open_backend(settings.backend, object=settings.object,
@@ -750,6 +780,8 @@ def identify_trial(settings: TrialSettings, progress: Callable | None = None,
     summary["sigma"] = list(settings.sigma)       # in effect, [mm, deg]
     summary["sigma_turn_deg"] = settings.turn_deg  # in effect, [deg]; 0 = no turn term
     summary["limit_stiffness"] = settings.limit_stiffness_in_effect  # in effect [N m/rad]
+    if settings.ramp_time_in_effect is not None:
+        summary["ramp_time"] = settings.ramp_time_in_effect      # in effect [s], the sim's
     guess, spread = settings.grasp_guess          # in effect (None: the backend's default)
     summary["grasp_guess"] = {"nominal_theta_deg": None if guess is None else list(guess),
                               "prior_spread_deg": float(spread),

@@ -111,6 +111,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--limit-stiffness", type=float, default=None, metavar="K_LIM",
                    help="the motion model's joint stops [N m/rad] (default: the sim's 17, "
                    "the real hand's 100)")
+    p.add_argument("--ramp-time", type=float, default=None, metavar="S",
+                   help="sim only: how long the sim takes to make each command change [s] "
+                   "(default 0.1, the hardware backend's default move)")
     p.add_argument("--cone-return", type=float, default=None, metavar="MU",
                    help="with rolling contacts: after each action return the contacts' "
                    "stretch onto the friction cone MU N and settle again (a cheap stand-in "
@@ -208,7 +211,7 @@ def run(args: argparse.Namespace) -> int:
         active_criterion=args.active_criterion, active_min_force_n=args.active_min_force,
         anneal_stages=args.anneal_stages,
         contact_stiffness=args.contact_stiffness, limit_stiffness=args.limit_stiffness,
-        cone_return=args.cone_return,
+        ramp_time=args.ramp_time, cone_return=args.cone_return,
         link_scaling=args.link_scaling, jitter_h=args.jitter_h, noise_prior=args.noise_prior,
         action_range_mm=args.action_range_mm, action_band_mm=args.action_band_mm)
     bar = None
@@ -303,6 +306,8 @@ def format_table(result, summary: dict, model) -> str:
                          + (f" (the sim's readings {noise:g} N noisy)" if noise else ""))
     if summary.get("limit_stiffness"):
         lines.append(f"joint stops: {summary['limit_stiffness']:g} N m/rad")
+    if summary.get("ramp_time"):
+        lines.append(f"the sim's command changes: ramped over {summary['ramp_time']:g} s")
     guess = summary.get("grasp_guess", {})
     if guess.get("contact_prior"):
         where = {"surface": "where the pads would touch the object's surface",
