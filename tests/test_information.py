@@ -119,11 +119,11 @@ def test_apple_floor_is_above_the_criterion_at_the_likelihoods_scales():
                                                      max_iterations=15)))
     at = {r["actions"]: r for r in rep["by_action"]}
     assert rep["grasp_lost_at"] is None and len(rep["by_action"]) == 16
-    # At the sim's default likelihood (0.2 mm / 0.4 deg + a 1.0-deg turn since session 17):
-    # 5.20 and 0.96 degrees with the model's stops at 17 N m/rad (the sim's default since
-    # session 28; 5.18 and 0.95 at 100), scales 0.31x (4.64 and 0.95, 0.35x, at the earlier
-    # 0.35 / 0.7); the model's information, not the particle count, keeps the likelihood's
-    # floor above 2 degrees (docs/RESULTS.md 5).
+    # At the sim's default likelihood (0.2 mm / 0.4 deg + a 1.0-deg turn since session 17): 5.20 and
+    # 0.96 degrees with the model's stops at 17 N m/rad (the sim's default since session 28; 5.18
+    # and 0.95 at 100; the same at the sim's 0.1 s ramp of session 30), scales 0.31x (4.64 and 0.95,
+    # 0.35x, at the earlier 0.35 / 0.7); the model's information, not the particle count, keeps the
+    # likelihood's floor above 2 degrees (docs/RESULTS.md 5).
     assert 3.5 < at[15]["mean_width_deg"] < 6.0
     assert at[15]["mean_width_deg_camera"] < 1.5
     assert at[15]["mean_width_deg"] < 0.5 * at[1]["mean_width_deg"]
