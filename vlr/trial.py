@@ -67,7 +67,7 @@ LIMIT_STIFFNESS_DEFAULT = {"sim": 17.0}
 
 # How long the sim takes to make each command change [s] (`sim.backend.SimOptions.ramp_time`),
 # when a trial does not say (`ramp_time`): the hardware backend's default move, 5 goal
-# positions 20 ms apart (`hardware.config.MotionSettings`), so that the sim moves as the real
+# positions 20 ms apart (`hardware.config.MotionConfig`), so that the sim moves as the real
 # hand is moved. At SimOptions' 50 ms the fingers, whose springs and damping settle in about
 # as long, lag the command, and a contact can slide where the quasi-static model rolls: the
 # gelatin box's seed-2 action 3 (`vlr gap --ramp-time`, docs/RESULTS.md 5, session 30).
