@@ -1,6 +1,8 @@
 """`vlr gap --json` reports, one row per object and seed: the full model's (last rung's)
 per-action ratios, its open-loop drift and its failed solves, as CSV (docs/RESULTS.md
-section 5, session 30: `docs/results/gap-ramp.csv`).
+section 5, session 30: `docs/results/gap-ramp.csv`). Besides the issue's measure, the mean
+of the per-action ratios, the pooled ratio: the actions' summed error over their summed true
+motion (the solved actions), which an action that hardly moves the object cannot inflate.
 
 A reader, not part of the package. Each report is a `vlr gap --object all --json` file (or
 one object's); LABEL=FILE names the setting it was measured with.
@@ -16,7 +18,17 @@ import sys
 from pathlib import Path
 
 COLUMNS = ("setting", "object", "seed", "ramp_time", "start", "actions", "ratio_position",
-           "ratio_orientation", "drift_position", "drift_orientation", "failed_solves")
+           "ratio_orientation", "pooled_position", "pooled_orientation", "drift_position",
+           "drift_orientation", "failed_solves")
+
+
+def _pooled(per_action: list[dict], kind: str) -> float:
+    """Summed error over summed true motion of the solved actions (`kind`: "position" or
+    "orientation")."""
+    unit = "mm" if kind == "position" else "deg"
+    ok = [a for a in per_action if a["ok"]]
+    motion = sum(a[f"motion_{kind}_{unit}"] for a in ok)
+    return sum(a[f"error_{kind}_{unit}"] for a in ok) / motion if motion > 0 else float("nan")
 
 
 def rows(label: str, path: str) -> list[dict]:
@@ -34,6 +46,8 @@ def rows(label: str, path: str) -> list[dict]:
                     "actions": o["actions"],
                     "ratio_position": round(c["ratio_position_mean"], 4),
                     "ratio_orientation": round(c["ratio_orientation_mean"], 4),
+                    "pooled_position": round(_pooled(c["per_action"], "position"), 4),
+                    "pooled_orientation": round(_pooled(c["per_action"], "orientation"), 4),
                     "drift_position": round(c["drift_ratio"], 4),
                     "drift_orientation": round(c["drift_ratio_orientation"], 4),
                     "failed_solves": c["failed_solves"]})
@@ -66,10 +80,12 @@ def main() -> None:
         by.setdefault((r["setting"], r["ramp_time"]), []).append(r)
     for (label, ramp), rs in by.items():
         ori = [r["ratio_orientation"] for r in rs]
+        pooled = [r["pooled_orientation"] for r in rs]
         drift = [r["drift_orientation"] for r in rs]
         print(f"{label}, ramp {ramp:g} s: {len(rs)} object-seeds, orientation mean "
               f"{sum(ori) / len(ori):.3f}, "
-              f"{sum(v > 0.10 for v in ori)} over 0.10; drift in orientation at most "
+              f"{sum(v > 0.10 for v in ori)} over 0.10; pooled {sum(pooled) / len(pooled):.3f}, "
+              f"{sum(v > 0.10 for v in pooled)} over 0.10; drift in orientation at most "
               f"{max(drift):.3f}, {sum(v > 0.05 for v in drift)} over 0.05", file=sys.stderr)
 
 
