@@ -59,6 +59,8 @@ def main() -> None:
     ap.add_argument("reports", nargs="+", metavar="LABEL=FILE")
     ap.add_argument("--out", help="write the CSV here (default: print it)")
     args = ap.parse_args()
+    if args.out and not Path(args.out).resolve().parent.is_dir():
+        ap.error(f"--out {args.out}: its folder does not exist")
     table = []
     for item in args.reports:
         label, sep, path = item.rpartition("=")
