@@ -118,8 +118,8 @@ class GapSettings:
     ramp_time: float = 0.05
 
     def __post_init__(self) -> None:
-        if not (isinstance(self.ramp_time, (int, float)) and math.isfinite(self.ramp_time)
-                and 0 < self.ramp_time <= 2.0):
+        if not (isinstance(self.ramp_time, (int, float)) and not isinstance(self.ramp_time, bool)
+                and math.isfinite(self.ramp_time) and 0 < self.ramp_time <= 2.0):
             raise UserError(f"ramp time {self.ramp_time!r} s must be in (0, 2]")
         if self.start not in STARTS:
             raise UserError(f"start {self.start!r}: expected one of {', '.join(STARTS)}")

@@ -91,7 +91,8 @@ def test_gap_cli_writes_json(tmp_path, capsys):
                                 dict(slide_friction=0.0), dict(spin_friction=0.5),
                                 dict(contact_stiffness=0.0), dict(limit_stiffness=0.0),
                                 dict(spin_memory=True, spin_friction=0.0),
-                                dict(ramp_time=0.0), dict(ramp_time=float("nan"))])
+                                dict(ramp_time=0.0), dict(ramp_time=float("nan")),
+                                dict(ramp_time=True)])
 def test_bad_gap_settings_are_named(kw):
     with pytest.raises(UserError, match=next(iter(kw)).split("_")[0]):
         GapSettings(**kw)
