@@ -17,6 +17,8 @@ import json
 import sys
 from pathlib import Path
 
+from vlr.io import write_text_atomic
+
 COLUMNS = ("setting", "object", "seed", "ramp_time", "start", "actions", "ratio_position",
            "ratio_orientation", "pooled_position", "pooled_orientation", "drift_position",
            "drift_orientation", "failed_solves")
@@ -72,9 +74,7 @@ def main() -> None:
     w.writeheader()
     w.writerows(table)
     if args.out:
-        tmp = Path(args.out + ".tmp")
-        tmp.write_text(buf.getvalue())
-        tmp.replace(args.out)
+        write_text_atomic(args.out, buf.getvalue())
     else:
         print(buf.getvalue(), end="")
     by = {}

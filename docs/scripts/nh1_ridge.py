@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
+from vlr.io import atomic_path
 from vlr.trial import TrialSettings, identify_trial
 
 SWEEP = Path(__file__).resolve().parents[1] / "sweeps" / "sim-60k-ramp.yaml"
@@ -61,10 +62,13 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--actions", type=int, default=20)
     ap.add_argument("--particles", type=int, default=60000)
-    ap.add_argument("--save", type=Path, help="keep the cloud here (.npz)")
+    ap.add_argument("--save", type=Path, help="keep the cloud here (a .npz file)")
     a = ap.parse_args()
     if a.actions < 1 or a.particles < 100:
         ap.error(f"--actions {a.actions} --particles {a.particles}: need >= 1 and >= 100")
+    # Checked before a 5-minute trial; np.savez adds ".npz" to a name without it.
+    if a.save and (a.save.suffix != ".npz" or not a.save.resolve().parent.is_dir()):
+        ap.error(f"--save {a.save}: expected a .npz file in an existing folder")
     cloud: dict[str, np.ndarray] = {}
 
     def watch(pf, rec) -> None:
@@ -73,7 +77,8 @@ def main() -> None:
     run = identify_trial(settings(a.seed, a.actions, a.particles), watch=watch)
     truth = run.summary["truth_theta"]
     if a.save:
-        np.savez(a.save, **cloud)
+        with atomic_path(a.save) as tmp:
+            np.savez(tmp, **cloud)
     report(cloud["theta"], cloud["segments"], truth)
 
 

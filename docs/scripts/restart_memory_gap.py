@@ -7,7 +7,7 @@ action from the true configuration settled with glued contacts: every pad starts
 torque and with the glued settle's tangential loads, where the sim's pads carry their
 history. A filter's particle carries its own. Each action is predicted with the friction rung
 and session 27's terms (8 substeps, stops at 17 N m/rad, exact cylinders), the sim ramped over
-0.1 s, from the true configuration in four arms:
+0.1 s, from the true configuration in five arms:
 
 * `settle`: `vlr gap`'s measure (the issue's);
 * `settle, memory`: the same with spin memory (`vlr gap --spin-memory`): within an action
@@ -87,7 +87,11 @@ def main() -> None:
     ap.add_argument("objects", help=f"comma list ({', '.join(OBJECTS)})")
     ap.add_argument("seeds", help="comma list of seeds")
     a = ap.parse_args()
-    objects, seeds = a.objects.split(","), [int(s) for s in a.seeds.split(",")]
+    objects = a.objects.split(",")
+    try:
+        seeds = [int(s) for s in a.seeds.split(",")]
+    except ValueError:
+        ap.error(f"seeds {a.seeds!r}: expected a comma list of integers, e.g. 0,1,2")
     bad = [o for o in objects if o not in OBJECTS]
     if bad:
         ap.error(f"unknown object(s) {bad}: expected {', '.join(OBJECTS)}")
