@@ -394,7 +394,8 @@ def open_hand(*, object: str = "apple", hand: str = "modelo", seed: int = 0,
 def scoring_truth(hand: SimHand):
     """The sim's truth in the estimator's terms (vlr.synthetic.Truth), for SCORING only:
     joint angles, pad contact angles and normals, segments (link lengths and the pad centre's
-    z offset), stiffness, tendon stiffness, and the POM pose."""
+    z offset), stiffness, tendon stiffness, the POM pose, and the object's mass and centre of
+    mass as the simulator holds them (its body's inertial, in O)."""
     from vlr.kinematics import angles_from_normals
     from vlr.synthetic import Truth
 
@@ -412,4 +413,6 @@ def scoring_truth(hand: SimHand):
                  segments=np.array([[f.proximal_length, f.pad_center[2]] for f in fingers]),
                  stiffness=np.array([f.stiffness for f in fingers]),
                  tendon=np.full(len(fingers), hand.true_spec.tendon_stiffness),
-                 position=t.pom_position, rotation=t.pom_rotation)
+                 position=t.pom_position, rotation=t.pom_rotation,
+                 object_mass=float(hand.model.body_mass[hand._obj_body]),
+                 object_com=np.array(hand.model.body_ipos[hand._obj_body], dtype=float))

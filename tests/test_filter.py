@@ -89,6 +89,38 @@ def test_parse_unknown(modelo):
         parse_unknown("mass:thumb", modelo)
 
 
+def test_parse_the_objects_unknowns(modelo):
+    u = parse_unknown("mass", modelo, obj=OBJ)
+    assert (u.kind, u.finger, u.joint) == ("mass", -1, -1)
+    assert u.prior == pytest.approx((0.25 * OBJ.mass, 4.0 * OBJ.mass))
+    u = parse_unknown("com:z", modelo, obj=OBJ)
+    assert (u.kind, u.joint) == ("com", 2)
+    assert u.prior == pytest.approx((OBJ.com[2] - 0.015, OBJ.com[2] + 0.015))
+    assert parse_unknown("mass", modelo, (0.05, 0.2), OBJ).prior == (0.05, 0.2)
+    for spec, message in (("mass", "need the object believed"),):
+        with pytest.raises(ValueError, match=message):
+            parse_unknown(spec, modelo)
+    for spec, prior, message in (("mass:thumb", None, "takes no finger"),
+                                 ("com:w", None, "com:x, com:y or com:z"),
+                                 ("com", None, "com:x, com:y or com:z"),
+                                 ("mass", (0.0, 0.2), "0 < low"),
+                                 ("com:x", (0.01, -0.01), "low <= high")):
+        with pytest.raises(ValueError, match=message):
+            parse_unknown(spec, modelo, prior, OBJ)
+
+
+def test_the_objects_unknowns_are_sampled_within_their_priors(modelo):
+    pf = _run(modelo, 3, unknowns=("mass", "com:x"))
+    names = pf.dim_names
+    x = pf.pack(pf.state)
+    for spec in ("mass", "com:x"):
+        u = next(u for u in pf.unknowns if u.spec == spec)
+        col = x[:, names.index(spec)]
+        assert np.all((u.prior[0] <= col) & (col <= u.prior[1]))
+        assert col.std() > 0   # sampled, not the believed value for every particle
+    assert pf.state.object_com[:, 1:].tolist() == [list(OBJ.com[1:])] * pf.state.n
+
+
 def _run(modelo, seed, steps=2, unknowns=(), **config):
     world = SyntheticWorld(modelo, OBJ, SyntheticConfig(seed=1))
     u = world.grasp()

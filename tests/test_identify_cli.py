@@ -72,6 +72,25 @@ def test_identify_records_each_unknowns_error_per_iteration(tmp_path):
     assert (out / "convergence.png").stat().st_size > 1000
 
 
+def test_identify_scores_the_objects_unknowns(tmp_path):
+    out = tmp_path / "mass"
+    rc = main(["identify", "--backend", "synthetic", "--object", "gelatin_box", "--particles",
+               "1500", "--max-iterations", "2", "--seed", "2", "--unknown", "mass",
+               "--unknown", "com:z", "--out", str(out), "--quiet"])
+    assert rc == 0
+    result = json.loads((out / "result.json").read_text())
+    hist = np.load(out / "history.npz")
+    # the gelatin box's spec: 97 g, its centre of mass 16 mm above the tag
+    np.testing.assert_allclose(hist["truth_unknowns"], [[0.097, 0.016]] * 3, rtol=1e-9)
+    np.testing.assert_allclose(result["errors"]["object_mass_g"],
+                               1e3 * abs(hist["mean"][-1, -2] - 0.097), rtol=1e-6)
+    np.testing.assert_allclose(result["errors"]["object_com_mm"]["z"],
+                               1e3 * abs(hist["mean"][-1, -1] - 0.016), rtol=1e-6)
+    rc = main(["identify", "--backend", "synthetic", "--unknown", "com:w", "--out",
+               str(tmp_path / "bad"), "--quiet"])
+    assert rc == 2 and not (tmp_path / "bad" / "result.json").exists()
+
+
 def test_identify_sim_runs_from_rendered_frames(tmp_path):
     out = tmp_path / "sim"
     rc = main(["identify", "--backend", "sim", "--object", "gelatin_box", "--particles",

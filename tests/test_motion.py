@@ -453,3 +453,33 @@ def test_a_per_call_config_gets_its_own_link_scaling(modelo):
     assert mm_off.solve(c, u0, replace(PIN, **free))[0][0] == 0
     np.testing.assert_array_equal(a.theta, b.theta)
     assert np.abs(a.theta - c.theta).max() > 1e-6
+
+
+def test_a_particles_own_object_mass_and_centre_of_mass_match_reference(modelo):
+    """The object's unknowns (issue #5, term (b)): each particle's own mass and centre of
+    mass in the kernel's gravity term, against finite differences of the reference."""
+    mm, st, u0 = grasp(modelo, config=ROLL)
+    st.hold_object(OBJ)
+    st.object_mass[0] = 0.31
+    st.object_com[0] = (0.004, -0.006, 0.045)
+    shake(st, 4, 0.02, 0.02, 2e-4)
+    check_derivatives(mm, st, u0, mm.rolling_frames(st)[0], e_rel=1e-10, hess_atol=2e-6)
+
+
+def test_a_heavier_particle_sinks_and_the_models_own_object_changes_nothing(modelo):
+    mm, st, u0 = grasp(modelo, n=3, config=ROLL)
+    own = st.copy()
+    st.hold_object(OBJ)
+    st.object_mass[2] = 2 * OBJ.mass
+    u = u0 + 2e-4
+    assert np.all(mm.solve(st, u, u_from=u0)[0] == 0)
+    assert np.all(mm.solve(own, u, u_from=u0)[0] == 0)
+    # Particle 0 holds the model's object as its own: the same numbers as without.
+    np.testing.assert_array_equal(st.pos[0], own.pos[0])
+    np.testing.assert_array_equal(st.theta[0], own.theta[0])
+    g = np.asarray(mm.config.gravity) / np.linalg.norm(mm.config.gravity)
+    assert (st.pos[2] - st.pos[0]) @ g > 1e-5   # the doubled weight sinks it by > 10 um
+    copied = st.take(np.array([2, 0]))
+    assert copied.object_mass.tolist() == [2 * OBJ.mass, OBJ.mass]
+    with pytest.raises(ValueError, match="object_mass"):
+        own.put(np.array([0]), copied.take(np.array([0])))

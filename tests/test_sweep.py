@@ -216,6 +216,21 @@ def test_the_row_gives_the_posterior_medians_figures_beside_the_means():
     assert "joints_deg_median" not in _row(rec)
 
 
+def test_the_row_gives_the_objects_unknowns_in_grams_and_millimetres():
+    from vlr.sweep import _row, summarize_rows
+
+    rec = {"case": "c", "status": "ok", "settings": {},
+           "result": {"errors": {"object_mass_g": 12.5, "object_com_mm": {"z": 3.0}},
+                      "errors_median": {"object_mass_g": 10.0}}}
+    row = _row(rec)
+    assert (row["object_mass_g"], row["object_com_mm.z"]) == (12.5, 3.0)
+    assert row["object_mass_g_median"] == 10.0
+    s = summarize_rows([row])[0]
+    assert s["object_mass_g error [g]"] == "12.50"
+    assert s["object_mass_g_median error [g]"] == "10.00"
+    assert s["object_com_mm.z error [mm]"] == "3.00"
+
+
 def test_a_grid_setting_splits_the_summary_instead_of_being_averaged(tmp_path):
     from vlr.sweep import varying_settings, write_tables
 

@@ -650,9 +650,13 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk,
                th_t, p_t, R_t, dth, dc, La, X, y, S, col, th0, p0):
     """Damped Newton (Levenberg-Marquardt) for particle q, warm-started from its state.
-    Updates theta[q], pos[q], rot[q] in place; returns (status, iterations)."""
+    Updates theta[q], pos[q], rot[q] in place; returns (status, iterations). The object's
+    mass and centre of mass are the particle's own (omass (P,), ocom (P, 3)): an unknown
+    object is identified like an unknown spring."""
     n_f, k_n = theta.shape[1], theta.shape[2]
     th = theta[q]
+    om = omass[q]
+    oc = ocom[q]
     rl = roll[q] if flags[ROLLING] != 0 else roll[0]
     lagged = flags[ROLLING] != 0
     p = pos[q]
@@ -664,7 +668,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
         p0[a] = p[a]
     e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
                   base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
-                  omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk)
+                  om, oc, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk)
     if not math.isfinite(e):
         return NONFINITE, 0
     mu = prm[P_MU0]
@@ -717,7 +721,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
             _rotate3(R, w0, w1, w2, R_t)
             e_t = _evaluate(th_t, seg[q], nrm[q], anc[q], rl, p_t, R_t, stiff[q], kt[q], u,
                             base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy,
-                            pad_r, omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi,
+                            pad_r, om, oc, grav, flags, prm, gA, gC, A, B, C, sphi, cphi,
                             qy, qz, jac, M, vk)
             if math.isfinite(e_t) and e_t <= e + 1e-4 * t * gd + tol_e:
                 accepted = True
@@ -744,7 +748,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                                               qz)):
                 e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
                               base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy,
-                              pad_r, omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi,
+                              pad_r, om, oc, grav, flags, prm, gA, gC, A, B, C, sphi,
                               cphi, qy, qz, jac, M, vk)
             if t == 1.0:
                 mu = max(mu * 0.1, 1e-12)
@@ -762,7 +766,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                 break
             e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
                           base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
-                          omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz,
+                          om, oc, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz,
                           jac, M, vk)
     # Jump check: a change far beyond what the action can cause means another branch.
     big = 0.0
@@ -783,7 +787,8 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
 def solve_batch(theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                 base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
                 omass, ocom, grav, flags, prm, max_iter, active, status, iters):
-    """Equilibrium (Eq. 9) of every active particle at tendon command u, in place."""
+    """Equilibrium (Eq. 9) of every active particle at tendon command u, in place; the
+    object's mass omass (P,) and centre of mass ocom (P, 3) are per particle."""
     n_p, n_f, k_n = theta.shape
     n_chunks = min(n_p, 64)
     for ch in prange(n_chunks):

@@ -9,8 +9,9 @@ particle's POM anchor in its new contact frame.
 Sampled dimensions ("dims"), in this order: joint angles theta (N*K) [rad]; the contact on
 each pad as two angles (alpha, beta) per finger [rad] (`vlr.kinematics.normals_from_angles`);
 then the unknown parameters asked for, e.g. "stiffness:thumb.distal" [N m/rad],
-"length:left.proximal" [m], "tendon" or "tendon:thumb" [N/m]. Known parameters are not
-sampled (METHOD.md 3).
+"length:left.proximal" [m], "tendon" or "tendon:thumb" [N/m], the object's "mass" [kg] or
+a coordinate of its centre of mass in O, "com:z" [m] (issue #5, term (b)). Known parameters
+are not sampled (METHOD.md 3).
 """
 
 from __future__ import annotations
@@ -47,6 +48,13 @@ __all__ = [
 # quarter of it, about the camera's own error at the sim's default scales (0.05 mm of 0.2).
 NOISE_PRIOR = (0.25, 1.0)
 
+# The object's unknowns' default priors (ours): its mass 0.25-4x the spec's, as a spring's;
+# a coordinate of its centre of mass within 15 mm of the spec's, a third of the apple's
+# radius: a user's guess of where an object's weight sits, not a measurement.
+MASS_PRIOR_FACTORS = (0.25, 4.0)
+COM_PRIOR_HALF_WIDTH = 0.015
+COM_AXES = ("x", "y", "z")
+
 
 @dataclass(frozen=True)
 class Unknown:
@@ -54,9 +62,10 @@ class Unknown:
 
     Attributes:
         spec: the spec string, e.g. "stiffness:thumb.distal".
-        kind: "stiffness" | "length" | "tendon" | "noise".
-        finger: finger index, or -1 for all fingers ("tendon", "noise").
-        joint: joint index (stiffness, length), else -1.
+        kind: "stiffness" | "length" | "tendon" | "noise" | "mass" | "com".
+        finger: finger index, or -1 for all fingers ("tendon", "noise") and the object's
+            unknowns ("mass", "com").
+        joint: joint index (stiffness, length), the axis of O ("com": 0, 1, 2), else -1.
         prior: (low, high) of the uniform prior [SI units].
     """
 
@@ -68,17 +77,22 @@ class Unknown:
 
 
 def parse_unknown(spec: str, model: HandModel,
-                  prior: tuple[float, float] | None = None) -> Unknown:
-    """Parse "stiffness:FINGER.JOINT", "length:FINGER.JOINT", "tendon", "tendon:FINGER" or
-    "noise".
+                  prior: tuple[float, float] | None = None,
+                  obj: ObjectParams | None = None) -> Unknown:
+    """Parse "stiffness:FINGER.JOINT", "length:FINGER.JOINT", "tendon", "tendon:FINGER",
+    "noise", or the object's "mass" and "com:x|y|z" (which need `obj`, the object believed).
 
     Default priors (ours): stiffness 0.25-4x nominal; length 0.5-1.3x nominal (a replaced
     finger may be much shorter: NF1 is 40 mm against 62 mm); tendon stiffness 0.5-2x nominal;
     noise, the factor on the likelihood's pose scales (`vlr.observation`, "The model error's
-    size"), `NOISE_PRIOR`: the configured scales are its top, set for the worst object.
+    size"), `NOISE_PRIOR`: the configured scales are its top, set for the worst object;
+    the object's mass `MASS_PRIOR_FACTORS` times the believed, a coordinate of its centre of
+    mass the believed +- `COM_PRIOR_HALF_WIDTH` (the weight's potential, Eq. 9).
     A "distal" length is the pad centre's offset along the distal link (kinematics.py).
     """
     kind, _, rest = spec.partition(":")
+    if kind in ("mass", "com"):
+        return _parse_object_unknown(spec, kind, rest, prior, obj)
     if kind == "noise":
         if rest:
             raise ValueError(f"unknown parameter spec {spec!r}: 'noise' takes no finger")
@@ -94,7 +108,7 @@ def parse_unknown(spec: str, model: HandModel,
         return Unknown(spec, kind, finger, -1, (float(lo), float(hi)))
     if kind not in ("stiffness", "length") or "." not in rest:
         raise ValueError(f"unknown parameter spec {spec!r}; use stiffness:FINGER.JOINT, "
-                         "length:FINGER.JOINT, tendon, tendon:FINGER or noise")
+                         "length:FINGER.JOINT, tendon, tendon:FINGER, noise, mass or com:x|y|z")
     fname, jname = rest.split(".", 1)
     i, k = model.finger_index(fname), model.joint_index(jname)
     if kind == "stiffness":
@@ -106,9 +120,39 @@ def parse_unknown(spec: str, model: HandModel,
     return Unknown(spec, kind, i, k, (float(lo), float(hi)))
 
 
+def _parse_object_unknown(spec: str, kind: str, rest: str, prior: tuple[float, float] | None,
+                          obj: ObjectParams | None) -> Unknown:
+    """The object's "mass" or "com:AXIS" (`parse_unknown`)."""
+    if obj is None:
+        raise ValueError(f"unknown parameter spec {spec!r}: the object's unknowns need the "
+                         "object believed (its spec's mass and centre of mass)")
+    if kind == "mass":
+        if rest:
+            raise ValueError(f"unknown parameter spec {spec!r}: 'mass' is the object's, "
+                             "it takes no finger")
+        lo, hi = prior or tuple(f * float(obj.mass) for f in MASS_PRIOR_FACTORS)
+        if not 0 < lo <= hi < math.inf:
+            raise ValueError(f"mass prior ({lo}, {hi}) [kg] must satisfy 0 < low <= high, "
+                             "both finite")
+        return Unknown(spec, kind, -1, -1, (float(lo), float(hi)))
+    if rest not in COM_AXES:
+        raise ValueError(f"unknown parameter spec {spec!r}: use com:x, com:y or com:z "
+                         "(an axis of the object frame O)")
+    axis = COM_AXES.index(rest)
+    c = float(obj.com[axis])
+    lo, hi = prior or (c - COM_PRIOR_HALF_WIDTH, c + COM_PRIOR_HALF_WIDTH)
+    if not -math.inf < lo <= hi < math.inf:
+        raise ValueError(f"{spec} prior ({lo}, {hi}) [m] must satisfy low <= high, both finite")
+    return Unknown(spec, kind, -1, axis, (float(lo), float(hi)))
+
+
 def _get_unknown(state: ParticleState, u: Unknown) -> np.ndarray:
     if u.kind == "noise":
         return state.noise
+    if u.kind == "mass":
+        return state.object_mass
+    if u.kind == "com":
+        return state.object_com[:, u.joint]
     if u.kind == "stiffness":
         return state.stiffness[:, u.finger, u.joint]
     if u.kind == "length":
@@ -119,6 +163,10 @@ def _get_unknown(state: ParticleState, u: Unknown) -> np.ndarray:
 def _set_unknown(state: ParticleState, u: Unknown, values: np.ndarray) -> None:
     if u.kind == "noise":
         state.noise[:] = values
+    elif u.kind == "mass":
+        state.object_mass[:] = values
+    elif u.kind == "com":
+        state.object_com[:, u.joint] = values
     elif u.kind == "stiffness":
         state.stiffness[:, u.finger, u.joint] = values
     elif u.kind == "length":
@@ -351,7 +399,7 @@ class ParticleFilter:
         self.config = config or FilterConfig()
         self.motion = MotionModel(model, obj, self.config.motion)
         self.obs_model = self.config.observation
-        self.unknowns = tuple(parse_unknown(s, model, self.config.priors.get(s))
+        self.unknowns = tuple(parse_unknown(s, model, self.config.priors.get(s), obj)
                               for s in self.config.unknowns)
         self.rng = np.random.default_rng(self.config.seed)
         self.state: ParticleState | None = None
@@ -397,8 +445,14 @@ class ParticleFilter:
         state.theta[...] = x[:, :n_th].reshape(-1, nf, nk)
         ab = x[:, n_th:n_th + 2 * nf].reshape(-1, nf, 2)
         state.normals[...] = normals_from_angles(ab[..., 0], ab[..., 1])
+        self._hold_object(state)
         for j, u in enumerate(self.unknowns):
             _set_unknown(state, u, x[:, n_th + 2 * nf + j])
+
+    def _hold_object(self, state: ParticleState) -> None:
+        """With the object's unknowns, each particle carries its own object."""
+        if any(u.kind in ("mass", "com") for u in self.unknowns):
+            state.hold_object(self.motion.obj)
 
     # ---- Algorithm 1
 
@@ -440,6 +494,7 @@ class ParticleFilter:
                                       np.asarray(observation.rotation, dtype=float))
         state.theta += rng.normal(0.0, cfg.theta_spread, state.theta.shape)
         spread = rng.normal(0.0, cfg.contact_spread, (p, nf, 2))
+        self._hold_object(state)
         for u in self.unknowns:
             _set_unknown(state, u, rng.uniform(u.prior[0], u.prior[1], p))
         centre = np.asarray(nominal_contact, dtype=float)[None]

@@ -155,6 +155,10 @@ def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
             true = truth.stiffness[u.finger, u.joint]
         elif u.kind == "length":
             true = truth.segments[u.finger, u.joint]
+        elif u.kind == "mass":
+            true = truth.object_mass
+        elif u.kind == "com":
+            true = truth.object_com[u.joint]
         else:
             true = truth.tendon[max(u.finger, 0)]
         ue[u.spec] = float(post.mean[base + j] - true)

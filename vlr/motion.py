@@ -65,6 +65,10 @@ TERMS: dict[str, int] = {
     "rolling": kern.ROLLING,
 }
 
+# Where the object's mass and centre of mass sit in `MotionModel._shared` (the kernel's
+# arguments after the hand's): replaced per call by the particles' own (`_shared_for`).
+_OBJECT_MASS, _OBJECT_COM = 11, 12
+
 # A frictional solve first relaxes the grasp at the old command, with this many times the
 # iterations of a solve (`MotionModel._solve`).
 RELAX_ITERATIONS = 8
@@ -278,6 +282,10 @@ class ParticleState:
             unknown ("noise", `vlr.filter.parse_unknown`). The motion model ignores it.
         spin_torque: (P, N) the spin torque each pad's torsional friction holds [N m]
             (`MotionConfig.spin_memory`; 0 without it).
+        object_mass: (P,) the object's mass [kg] when it is an unknown ("mass",
+            `vlr.filter.parse_unknown`); None: the motion model's `ObjectParams`.
+        object_com: (P, 3) the object's centre of mass in O [m] when an unknown ("com:x",
+            ...); None: the motion model's.
     """
 
     theta: np.ndarray
@@ -291,6 +299,8 @@ class ParticleState:
     valid: np.ndarray
     noise: np.ndarray
     spin_torque: np.ndarray
+    object_mass: np.ndarray | None = None
+    object_com: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -298,16 +308,30 @@ class ParticleState:
 
     def take(self, idx: np.ndarray) -> ParticleState:
         """A new state of the particles `idx` (resampling), arrays copied and contiguous."""
-        return ParticleState(**{f.name: np.ascontiguousarray(getattr(self, f.name)[idx])
+        return ParticleState(**{f.name: _map(getattr(self, f.name),
+                                             lambda a: np.ascontiguousarray(a[idx]))
                                 for f in fields(self)})
 
     def put(self, idx: np.ndarray, other: ParticleState) -> None:
         """Write the particles of `other` into the places `idx` of this state (in place)."""
         for f in fields(self):
-            getattr(self, f.name)[idx] = getattr(other, f.name)
+            mine, theirs = getattr(self, f.name), getattr(other, f.name)
+            if (mine is None) != (theirs is None):
+                raise ValueError(f"put: {f.name} is per particle in one state, not the other")
+            if mine is not None:
+                mine[idx] = theirs
 
     def copy(self) -> ParticleState:
-        return ParticleState(**{f.name: getattr(self, f.name).copy() for f in fields(self)})
+        return ParticleState(**{f.name: _map(getattr(self, f.name), np.copy)
+                                for f in fields(self)})
+
+    def hold_object(self, obj: ObjectParams) -> None:
+        """Give every particle its own object mass and centre of mass, `obj`'s to start
+        (for the object's unknowns, `vlr.filter.parse_unknown`)."""
+        if self.object_mass is None:
+            self.object_mass = np.full(self.n, float(obj.mass))
+        if self.object_com is None:
+            self.object_com = np.tile(np.asarray(obj.com, dtype=float), (self.n, 1))
 
     @classmethod
     def nominal(cls, model: HandModel, n: int, theta: np.ndarray, normals: np.ndarray,
@@ -338,6 +362,9 @@ class ParticleState:
         st.segments[0] = truth.segments
         st.stiffness[0] = truth.stiffness
         st.tendon[0] = truth.tendon
+        if getattr(truth, "object_mass", None) is not None:
+            st.object_mass = np.array([float(truth.object_mass)])
+            st.object_com = np.asarray(truth.object_com, dtype=float).reshape(1, 3).copy()
         st.anchor_to_pose(model)
         return st
 
@@ -366,6 +393,10 @@ class ParticleState:
         stretch of the contact penalty (Eq. 8 as a stiff spring), k_c times it the force."""
         anchors_palm = np.einsum("pij,pnj->pni", self.rot, self.anchors) + self.pos[:, None, :]
         return anchors_palm - self.contacts(model)
+
+
+def _map(a: np.ndarray | None, f) -> np.ndarray | None:
+    return None if a is None else f(a)
 
 
 def rotvec_to_matrix(w: np.ndarray) -> np.ndarray:
@@ -399,7 +430,7 @@ class MotionModel:
                                  else np.zeros_like(model.segments)),   # lseg: [8]
             np.ascontiguousarray(model.pad_center[:, :2]),
             np.ascontiguousarray(model.pad_radius),
-            float(obj.mass), np.asarray(obj.com, dtype=float),
+            float(obj.mass), np.asarray(obj.com, dtype=float),   # per particle: _shared_for
             np.asarray(self.config.gravity, dtype=float))
         self._flags = self.config.flags()
         self._prm = self._params(self.config)
@@ -469,14 +500,24 @@ class MotionModel:
                        self.obj.surface.kernel_radius + self.model.pad_radius)
         return self.config.contact_stiffness * np.maximum(0.0, -gap)
 
-    def _shared_for(self, cfg: MotionConfig) -> tuple:
-        """The kernel's shared arrays for `cfg`: the model's own, but with the gravity and
-        the link scaling a per-call config asks for."""
-        if (cfg.link_scaling == self.config.link_scaling
-                and tuple(cfg.gravity) == tuple(self.config.gravity)):
-            return self._shared
+    def object_arrays(self, state: ParticleState) -> tuple[np.ndarray, np.ndarray]:
+        """(P,) object masses [kg] and (P, 3) centres of mass in O [m]: the particles' own
+        (an unknown object), else this model's object for every particle."""
+        n = state.n
+        mass = (state.object_mass if state.object_mass is not None
+                else np.full(n, float(self.obj.mass)))
+        com = (state.object_com if state.object_com is not None
+               else np.broadcast_to(np.asarray(self.obj.com, dtype=float), (n, 3)))
+        return (np.ascontiguousarray(mass, dtype=float),
+                np.ascontiguousarray(com, dtype=float))
+
+    def _shared_for(self, cfg: MotionConfig, state: ParticleState) -> tuple:
+        """The kernel's shared arrays for `cfg` and `state`: the model's own, but with the
+        gravity and the link scaling a per-call config asks for, and the particles' object
+        masses and centres of mass."""
         shared = list(self._shared)
         shared[8] = self._lseg_on if cfg.link_scaling else self._lseg_off
+        shared[_OBJECT_MASS], shared[_OBJECT_COM] = self.object_arrays(state)
         shared[-1] = np.asarray(cfg.gravity, dtype=float)
         return tuple(shared)
 
@@ -562,8 +603,8 @@ class MotionModel:
                     if cfg.rolling else self._no_roll)
             kern.solve_batch(state.theta, state.segments, state.normals, state.anchors,
                              roll, state.pos, state.rot, state.stiffness, state.tendon, target,
-                             *self._shared_for(cfg), flags, prm, budgets[j], state.valid,
-                             step_status, it)
+                             *self._shared_for(cfg, state), flags, prm, budgets[j],
+                             state.valid, step_status, it)
             iters += it
             # A particle keeps the status of the substep it failed in (later ones say only
             # "inactive"), so that `_follow` sees a jump or no convergence as such.
@@ -637,11 +678,14 @@ class MotionModel:
         nf, nk = self.model.n_fingers, self.model.n_joints
         gA, gC = np.empty((nf, nk)), np.empty(6)
         A, B, C = np.empty((nf, nk, nk)), np.empty((nf, nk, 6)), np.empty((6, 6))
+        shared = list(self._shared)
+        mass, com = self.object_arrays(state)
+        shared[_OBJECT_MASS], shared[_OBJECT_COM] = float(mass[q]), com[q]
         e = kern.evaluate_one(state.theta[q], state.segments[q], state.normals[q],
                               state.anchors[q], np.ascontiguousarray(roll, dtype=float),
                               state.pos[q], state.rot[q],
                               state.stiffness[q], state.tendon[q],
-                              np.asarray(u, dtype=float), *self._shared, self._flags,
+                              np.asarray(u, dtype=float), *shared, self._flags,
                               self._prm, gA, gC, A, B, C)
         n = nf * nk
         H = np.zeros((n + 6, n + 6))
@@ -709,7 +753,8 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
         com_p = m.base_pos[:, None, :] + np.einsum("nab,nkb->nka", m.base_rot, com_f)
         e -= np.sum(m.link_masses * scale * (com_p @ g))
     if "object_gravity" in cfg.terms:
-        e -= obj.mass * g @ (pos + rot @ np.asarray(obj.com))
+        mass, com = motion.object_arrays(state)
+        e -= mass[q] * g @ (pos + rot @ com[q])
     if "contacts" in cfg.terms and "rolling" in cfg.terms:
         c = contact_points(m, theta, state.normals[q], state.segments[q])
         d = c - (pos + state.anchors[q] @ rot.T)

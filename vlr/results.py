@@ -106,6 +106,10 @@ def _errors(err: np.ndarray, unknown_error: dict[str, float], model) -> dict:
             errors.setdefault("link_length_mm_by_joint", {})[rest] = abs(e) * 1e3
         elif kind == "stiffness":
             stiff[rest] = abs(e)
+        elif kind == "mass":
+            errors["object_mass_g"] = abs(e) * 1e3
+        elif kind == "com":
+            errors.setdefault("object_com_mm", {})[rest] = abs(e) * 1e3
     if lengths:
         errors["link_length_mm"] = {f: float(np.mean(v)) for f, v in lengths.items()}
     if stiff:
@@ -150,7 +154,9 @@ def write_outputs(out: Path, result, summary: dict, model, truths: list | None =
 # Plot units of the unknowns: (scale from SI, axis label).
 _UNKNOWN_UNITS = {"stiffness": (1.0, "stiffness [N m/rad]"), "length": (1e3, "length [mm]"),
                   "tendon": (1e-3, "tendon stiffness [N/mm]"),
-                  "noise": (1.0, "factor on the pose scales")}
+                  "noise": (1.0, "factor on the pose scales"),
+                  "mass": (1e3, "object mass [g]"),
+                  "com": (1e3, "centre of mass in O [mm]")}
 
 
 def _plot(path: Path, hist: dict, model, n: int, k: int, unknowns: list[str] = ()) -> None:

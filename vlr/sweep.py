@@ -298,6 +298,15 @@ def _at_paper_budget(rec: dict[str, Any], key: str) -> Any:
     return None
 
 
+def _object_unknowns(row: dict[str, Any], errors: dict[str, Any], suffix: str) -> None:
+    """The object's unknowns' absolute errors (`vlr.results`): its mass [g] and each
+    coordinate of its centre of mass asked for [mm]."""
+    if errors.get("object_mass_g") is not None:
+        row[f"object_mass_g{suffix}"] = errors["object_mass_g"]
+    for axis, v in (errors.get("object_com_mm") or {}).items():
+        row[f"object_com_mm{suffix}.{axis}"] = v
+
+
 def _proximal_links_mm(errors: dict[str, Any]) -> float | None:
     """The mean error over the proximal links alone. The paper's novel-finger unknown is the
     proximal link (METHOD.md 3, 6); the pad's offset along the distal link is ours (our novel
@@ -330,6 +339,7 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
         row["proximal_link_mm"] = links
     for joint, v in (errors.get("stiffness") or {}).items():
         row[f"stiffness.{joint}"] = v
+    _object_unknowns(row, errors, "")
     # The same figures of the posterior median (vlr.filter.Summary), where recorded.
     median = _get(rec, ("result", "errors_median")) or {}
     if median:
@@ -341,6 +351,7 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
             row["proximal_link_mm_median"] = links
         for joint, v in (median.get("stiffness") or {}).items():
             row[f"stiffness_median.{joint}"] = v
+        _object_unknowns(row, median, "_median")
     # The likelihood's identified scale factor ("noise" unknown), where sampled.
     noise = _get(rec, ("result", "unknown_estimates", "noise", "median"))
     if noise is not None:
@@ -426,10 +437,12 @@ def summarize_rows(rows: list[dict[str, Any]],
         for title, col, digits in SUMMARY_COLUMNS:
             s[title] = _fmt([r.get(col) for r in ok], digits)
         extra = sorted({k for r in ok for k in r if k.startswith(
-            ("length_mm.", "stiffness.", "stiffness_median."))})
+            ("length_mm.", "stiffness.", "stiffness_median.", "object_mass_g",
+             "object_com_mm"))})
         for col in extra:
             digits = 4 if col.startswith("stiffness") else 2
-            unit = "N m/rad" if col.startswith("stiffness") else "mm"
+            unit = ("N m/rad" if col.startswith("stiffness")
+                    else "g" if col.startswith("object_mass") else "mm")
             s[f"{col} error [{unit}]"] = _fmt([r.get(col) for r in ok], digits)
         if any(r.get("noise_scale") is not None for r in ok):
             s["noise scale"] = _fmt([r.get("noise_scale") for r in ok], 2)

@@ -104,6 +104,8 @@ class Truth:
     tendon: np.ndarray
     position: np.ndarray
     rotation: np.ndarray
+    object_mass: float | None = None       # [kg]
+    object_com: np.ndarray | None = None   # (3,) in O [m]
 
 
 def nominal_grasp(model: HandModel, obj: ObjectParams, config: SyntheticConfig) -> NominalGrasp:
@@ -291,4 +293,6 @@ class SyntheticWorld:
         return Truth(theta=st.theta[0].copy(), contact=np.stack([a, b], -1),
                      normals=st.normals[0].copy(), segments=st.segments[0].copy(),
                      stiffness=st.stiffness[0].copy(), tendon=st.tendon[0].copy(),
-                     position=st.pos[0].copy(), rotation=st.rot[0].copy())
+                     position=st.pos[0].copy(), rotation=st.rot[0].copy(),
+                     object_mass=float(self.motion.obj.mass),
+                     object_com=np.asarray(self.motion.obj.com, dtype=float).copy())

@@ -591,8 +591,8 @@ def open_world(settings: TrialSettings) -> World:
     hand_spec = load_hand(settings.hand)
     obj_spec = load_object(settings.object)
     model = HandModel.from_spec(hand_spec)
-    check_unknowns(settings, model)  # before a backend opens (and must be closed)
     obj = ObjectParams.from_spec(obj_spec)
+    check_unknowns(settings, model, obj)  # before a backend opens (and must be closed)
     # The nominal guess is the filter's own model's equilibrium: with rolling contacts the
     # pads roll while the grasp settles, and the distal joints settle 25-30 degrees from the
     # pinned equilibrium (measured, synthetic seed 0): a pinned guess would centre the
@@ -637,8 +637,8 @@ def open_world(settings: TrialSettings) -> World:
         # hand): the filter's model must be that, not the command line's defaults.
         hand_spec = hand.spec
         model = HandModel.from_spec(hand_spec)
-        check_unknowns(settings, model)
         obj = ObjectParams.from_spec(spec)
+        check_unknowns(settings, model, obj)
         nominal = nominal_grasp(model, obj, guess)
 
     def observer():
@@ -656,13 +656,16 @@ def open_world(settings: TrialSettings) -> World:
     return World(hand, observer, truth, model, obj, nominal, hand_spec, spec, hand)
 
 
-def check_unknowns(settings: TrialSettings, model) -> None:
-    """Bad unknown specs become one UserError naming the spec."""
+def check_unknowns(settings: TrialSettings, model, obj=None) -> None:
+    """Bad unknown specs become one UserError naming the spec. Without `obj` (the object
+    believed) the object's unknowns ("mass", "com:z") are checked for their form only."""
     from vlr.filter import parse_unknown
+    from vlr.motion import ObjectParams
 
+    obj = obj or ObjectParams(mass=1.0, com=(0.0, 0.0, 0.0))  # the form only: no priors kept
     for u in settings.unknowns:
         try:
-            parse_unknown(u, model)
+            parse_unknown(u, model, obj=obj)
         except (ValueError, KeyError) as exc:
             raise UserError(f"unknown {u!r}: {exc}") from None
 

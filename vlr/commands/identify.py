@@ -28,7 +28,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--particles", type=int, default=60_000)
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--unknown", action="append", default=[],
-                   help="extra unknown, e.g. stiffness:thumb.distal or length:left.proximal; "
+                   help="extra unknown, e.g. stiffness:thumb.distal, length:left.proximal, "
+                   "the object's mass or a coordinate of its centre of mass (com:z); "
                    "'noise' identifies the size of the model's error (a factor on the "
                    "likelihood's pose scales, vlr.observation)")
     p.add_argument("--max-iterations", type=int, default=40)
