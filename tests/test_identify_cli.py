@@ -91,6 +91,21 @@ def test_identify_scores_the_objects_unknowns(tmp_path):
     assert rc == 2 and not (tmp_path / "bad" / "result.json").exists()
 
 
+def test_a_believed_mass_moves_the_mass_prior_and_not_the_world(tmp_path):
+    out = tmp_path / "believed"
+    rc = main(["identify", "--backend", "synthetic", "--object", "gelatin_box", "--particles",
+               "1000", "--max-iterations", "1", "--seed", "2", "--unknown", "mass",
+               "--object-mass", "0.2", "--out", str(out), "--quiet"])
+    assert rc == 0
+    hist = np.load(out / "history.npz")
+    np.testing.assert_allclose(hist["truth_unknowns"], 0.097, rtol=1e-9)  # the spec's
+    assert 0.05 <= hist["low"][0, -1] and hist["high"][0, -1] <= 0.8    # 0.25-4x 0.2 kg
+    assert hist["high"][0, -1] > 0.4    # the prior about the believed 0.2, not the spec's
+    capsys_rc = main(["identify", "--backend", "synthetic", "--object-mass", "-1", "--out",
+                      str(tmp_path / "bad"), "--quiet"])
+    assert capsys_rc == 2 and not (tmp_path / "bad").exists()
+
+
 def test_identify_sim_runs_from_rendered_frames(tmp_path):
     out = tmp_path / "sim"
     rc = main(["identify", "--backend", "sim", "--object", "gelatin_box", "--particles",

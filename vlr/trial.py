@@ -205,6 +205,9 @@ class TrialSettings:
             the unknowns.
         link_scaling: a link of unknown length weighs as the nominal link scaled to its
             length (`vlr.motion.MotionConfig.link_scaling`); False: the nominal weights.
+        object_mass: the object's mass the filter believes [kg]; None: its spec's. The
+            world keeps the spec's: a wrong guess to measure, and with the "mass" unknown
+            the centre of its prior (`vlr.filter.MASS_PRIOR_FACTORS`).
         anneal_stages: the filter's most weighting stages per observation
             (`vlr.filter.FilterConfig.anneal_stages`); 1: a tempered likelihood's rest is
             dropped.
@@ -250,6 +253,7 @@ class TrialSettings:
     link_scaling: bool = False
     jitter_h: float | None = None
     noise_prior: tuple[float, float] | None = None
+    object_mass: float | None = None
     config: str | None = None
 
     def __post_init__(self) -> None:
@@ -322,6 +326,9 @@ class TrialSettings:
         if self.contact_stiffness is not None and not (
                 math.isfinite(self.contact_stiffness) and self.contact_stiffness > 0):
             raise UserError(f"contact_stiffness {self.contact_stiffness} N/m must be > 0")
+        if self.object_mass is not None and not (
+                math.isfinite(self.object_mass) and self.object_mass > 0):
+            raise UserError(f"object_mass {self.object_mass} kg must be > 0")
         if self.limit_stiffness is not None and not (
                 math.isfinite(self.limit_stiffness) and self.limit_stiffness > 0):
             raise UserError(f"limit_stiffness {self.limit_stiffness} N m/rad must be > 0")
@@ -369,7 +376,8 @@ class TrialSettings:
                      "sigma_turn_deg", "sigma_tension_n", "tension_noise_n",
                      "slide_friction", "spin_friction", "active_model_error",
                      "active_min_force_n",
-                     "contact_stiffness", "limit_stiffness", "ramp_time", "cone_return"):
+                     "contact_stiffness", "limit_stiffness", "ramp_time", "cone_return",
+                     "object_mass"):
             v = getattr(self, name)
             if not (is_real(v) or (v is None and name in ("sigma_pos_mm", "sigma_rot_deg",
                                                           "sigma_turn_deg",
@@ -379,7 +387,8 @@ class TrialSettings:
                                                           "contact_stiffness",
                                                           "limit_stiffness",
                                                           "ramp_time",
-                                                          "cone_return"))):
+                                                          "cone_return",
+                                                          "object_mass"))):
                 raise bad(name, "a number")
         if self.noise_prior is not None:
             if (not isinstance(self.noise_prior, list | tuple) or len(self.noise_prior) != 2
@@ -498,6 +507,15 @@ class TrialSettings:
             return self.contact_prior
         return CONTACT_PRIOR_DEFAULT.get(self.backend, "pad")
 
+    def believed_object(self, spec):
+        """The object the filter believes (`vlr.motion.ObjectParams`): the spec's, with
+        `object_mass` in place of its mass if given."""
+        from vlr.motion import ObjectParams
+
+        obj = ObjectParams.from_spec(spec)
+        return obj if self.object_mass is None else replace(obj,
+                                                             mass=float(self.object_mass))
+
     @property
     def limit_stiffness_in_effect(self) -> float:
         """The motion model's joint stops [N m/rad] in effect: `limit_stiffness`, or the
@@ -591,7 +609,7 @@ def open_world(settings: TrialSettings) -> World:
     hand_spec = load_hand(settings.hand)
     obj_spec = load_object(settings.object)
     model = HandModel.from_spec(hand_spec)
-    obj = ObjectParams.from_spec(obj_spec)
+    obj = settings.believed_object(obj_spec)
     check_unknowns(settings, model, obj)  # before a backend opens (and must be closed)
     # The nominal guess is the filter's own model's equilibrium: with rolling contacts the
     # pads roll while the grasp settles, and the distal joints settle 25-30 degrees from the
@@ -613,7 +631,8 @@ def open_world(settings: TrialSettings) -> World:
         true_model = (HandModel.from_spec(load_hand(settings.true_hand))
                       if settings.true_hand else model)
         world_cfg = SyntheticConfig(seed=settings.seed, motion=motion)
-        world = SyntheticWorld(true_model, obj, world_cfg,
+        # The world holds the object as its spec has it, whatever the filter believes.
+        world = SyntheticWorld(true_model, ObjectParams.from_spec(obj_spec), world_cfg,
                                nominal_model=model,
                                stiffness_overrides=_true_stiffness(settings, true_model))
         return World(world, world.observe, world.truth, model, obj, nominal, hand_spec,
@@ -637,7 +656,7 @@ def open_world(settings: TrialSettings) -> World:
         # hand): the filter's model must be that, not the command line's defaults.
         hand_spec = hand.spec
         model = HandModel.from_spec(hand_spec)
-        obj = ObjectParams.from_spec(spec)
+        obj = settings.believed_object(spec)
         check_unknowns(settings, model, obj)
         nominal = nominal_grasp(model, obj, guess)
 

@@ -107,6 +107,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "exploratory change [mm] (default 0.2 0.4: 4-8 N at 20 N/mm)")
     p.add_argument("--action-band-mm", type=float, default=None, metavar="B",
                    help="commands stay within B mm of the grasp command (default 0.4)")
+    p.add_argument("--object-mass", type=float, default=None, metavar="KG",
+                   help="the object's mass the filter believes [kg] (default: its spec's; "
+                   "the sim keeps the spec's): a wrong guess, or with --unknown mass its "
+                   "prior's centre")
     p.add_argument("--contact-stiffness", type=float, default=None, metavar="K_C",
                    help="the motion model's contact penalty [N/m] (default 1e6)")
     p.add_argument("--limit-stiffness", type=float, default=None, metavar="K_LIM",
@@ -212,7 +216,7 @@ def run(args: argparse.Namespace) -> int:
         active_criterion=args.active_criterion, active_min_force_n=args.active_min_force,
         anneal_stages=args.anneal_stages,
         contact_stiffness=args.contact_stiffness, limit_stiffness=args.limit_stiffness,
-        ramp_time=args.ramp_time, cone_return=args.cone_return,
+        object_mass=args.object_mass, ramp_time=args.ramp_time, cone_return=args.cone_return,
         link_scaling=args.link_scaling, jitter_h=args.jitter_h, noise_prior=args.noise_prior,
         action_range_mm=args.action_range_mm, action_band_mm=args.action_band_mm)
     bar = None
