@@ -106,6 +106,22 @@ def test_a_believed_mass_moves_the_mass_prior_and_not_the_world(tmp_path):
     assert capsys_rc == 2 and not (tmp_path / "bad").exists()
 
 
+def test_a_believed_centre_of_mass_moves_the_com_prior_and_not_the_world(tmp_path):
+    out = tmp_path / "com"
+    rc = main(["identify", "--backend", "synthetic", "--object", "gelatin_box", "--particles",
+               "1000", "--max-iterations", "1", "--seed", "2", "--unknown", "com:x",
+               "--object-com", "0.01", "0", "0.016", "--out", str(out), "--quiet"])
+    assert rc == 0
+    hist = np.load(out / "history.npz")
+    np.testing.assert_allclose(hist["truth_unknowns"], 0.0, atol=1e-12)   # the spec's x
+    assert -0.005 <= hist["low"][0, -1] and hist["high"][0, -1] <= 0.025  # 0.01 +- 0.015
+    assert json.loads((out / "result.json").read_text())["settings"]["object_com"] == [
+        0.01, 0.0, 0.016]
+    rc = main(["identify", "--backend", "synthetic", "--object-com", "0", "nan", "0", "--out",
+               str(tmp_path / "bad"), "--quiet"])
+    assert rc == 2 and not (tmp_path / "bad").exists()
+
+
 def test_identify_sim_runs_from_rendered_frames(tmp_path):
     out = tmp_path / "sim"
     rc = main(["identify", "--backend", "sim", "--object", "gelatin_box", "--particles",

@@ -208,6 +208,9 @@ class TrialSettings:
         object_mass: the object's mass the filter believes [kg]; None: its spec's. The
             world keeps the spec's: a wrong guess to measure, and with the "mass" unknown
             the centre of its prior (`vlr.filter.MASS_PRIOR_FACTORS`).
+        object_com: the object's centre of mass the filter believes, [x, y, z] in O [m];
+            None: its spec's. The world keeps the spec's; with a "com:AXIS" unknown the
+            believed coordinate is the centre of its prior (`vlr.filter.COM_PRIOR_HALF_WIDTH`).
         anneal_stages: the filter's most weighting stages per observation
             (`vlr.filter.FilterConfig.anneal_stages`); 1: a tempered likelihood's rest is
             dropped.
@@ -254,6 +257,7 @@ class TrialSettings:
     jitter_h: float | None = None
     noise_prior: tuple[float, float] | None = None
     object_mass: float | None = None
+    object_com: tuple[float, float, float] | None = None
     config: str | None = None
 
     def __post_init__(self) -> None:
@@ -398,6 +402,11 @@ class TrialSettings:
             if "noise" not in self.unknowns:
                 raise bad("noise_prior", "a prior of the 'noise' unknown: add it to unknowns")
             object.__setattr__(self, "noise_prior", tuple(float(v) for v in self.noise_prior))
+        if self.object_com is not None:
+            if (not isinstance(self.object_com, list | tuple) or len(self.object_com) != 3
+                    or not all(is_real(v) and math.isfinite(v) for v in self.object_com)):
+                raise bad("object_com", "[x, y, z] in the object frame [m], finite")
+            object.__setattr__(self, "object_com", tuple(float(v) for v in self.object_com))
         if self.jitter_h is not None and not (is_real(self.jitter_h)
                                               and 0 <= self.jitter_h < 1):
             raise bad("jitter_h", "a number in [0, 1) (or none: the filter's default)")
@@ -466,6 +475,8 @@ class TrialSettings:
             d["action_range_mm"] = list(self.action_range_mm)
         if self.noise_prior is not None:
             d["noise_prior"] = list(self.noise_prior)
+        if self.object_com is not None:
+            d["object_com"] = list(self.object_com)
         return d
 
     @property
@@ -509,12 +520,15 @@ class TrialSettings:
 
     def believed_object(self, spec):
         """The object the filter believes (`vlr.motion.ObjectParams`): the spec's, with
-        `object_mass` in place of its mass if given."""
+        `object_mass` and `object_com` in place of its own where given."""
         from vlr.motion import ObjectParams
 
         obj = ObjectParams.from_spec(spec)
-        return obj if self.object_mass is None else replace(obj,
-                                                             mass=float(self.object_mass))
+        if self.object_mass is not None:
+            obj = replace(obj, mass=float(self.object_mass))
+        if self.object_com is not None:
+            obj = replace(obj, com=tuple(self.object_com))
+        return obj
 
     @property
     def limit_stiffness_in_effect(self) -> float:

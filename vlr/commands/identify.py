@@ -111,6 +111,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the object's mass the filter believes [kg] (default: its spec's; "
                    "the sim keeps the spec's): a wrong guess, or with --unknown mass its "
                    "prior's centre")
+    p.add_argument("--object-com", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
+                   help="the object's centre of mass the filter believes, in its frame O [m] "
+                   "(default: its spec's; the sim keeps the spec's)")
     p.add_argument("--contact-stiffness", type=float, default=None, metavar="K_C",
                    help="the motion model's contact penalty [N/m] (default 1e6)")
     p.add_argument("--limit-stiffness", type=float, default=None, metavar="K_LIM",
@@ -216,7 +219,8 @@ def run(args: argparse.Namespace) -> int:
         active_criterion=args.active_criterion, active_min_force_n=args.active_min_force,
         anneal_stages=args.anneal_stages,
         contact_stiffness=args.contact_stiffness, limit_stiffness=args.limit_stiffness,
-        object_mass=args.object_mass, ramp_time=args.ramp_time, cone_return=args.cone_return,
+        object_mass=args.object_mass, object_com=args.object_com,
+        ramp_time=args.ramp_time, cone_return=args.cone_return,
         link_scaling=args.link_scaling, jitter_h=args.jitter_h, noise_prior=args.noise_prior,
         action_range_mm=args.action_range_mm, action_band_mm=args.action_band_mm)
     bar = None
