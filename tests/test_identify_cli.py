@@ -72,54 +72,50 @@ def test_identify_records_each_unknowns_error_per_iteration(tmp_path):
     assert (out / "convergence.png").stat().st_size > 1000
 
 
-def test_identify_scores_the_objects_unknowns(tmp_path):
-    out = tmp_path / "mass"
-    rc = main(["identify", "--backend", "synthetic", "--object", "gelatin_box", "--particles",
-               "1500", "--max-iterations", "2", "--seed", "2", "--unknown", "mass",
-               "--unknown", "com:z", "--out", str(out), "--quiet"])
+def _gelatin_box(out, *options: str) -> tuple[dict, dict]:
+    """A short synthetic trial on the gelatin box (97 g, its centre of mass 16 mm above the
+    tag): its result.json and history.npz."""
+    rc = main(["identify", "--backend", "synthetic", "--object", "gelatin_box", "--seed", "2",
+               *options, "--out", str(out), "--quiet"])
     assert rc == 0
-    result = json.loads((out / "result.json").read_text())
-    hist = np.load(out / "history.npz")
+    return json.loads((out / "result.json").read_text()), np.load(out / "history.npz")
+
+
+def _refused(tmp_path, *options: str) -> None:
+    """Bad input: exit code 2 and no result folder."""
+    rc = main(["identify", "--backend", "synthetic", *options, "--out",
+               str(tmp_path / "bad"), "--quiet"])
+    assert rc == 2 and not (tmp_path / "bad").exists()
+
+
+def test_identify_scores_the_objects_unknowns(tmp_path):
+    result, hist = _gelatin_box(tmp_path / "mass", "--particles", "1500", "--max-iterations",
+                                "2", "--unknown", "mass", "--unknown", "com:z")
     # the gelatin box's spec: 97 g, its centre of mass 16 mm above the tag
     np.testing.assert_allclose(hist["truth_unknowns"], [[0.097, 0.016]] * 3, rtol=1e-9)
     np.testing.assert_allclose(result["errors"]["object_mass_g"],
                                1e3 * abs(hist["mean"][-1, -2] - 0.097), rtol=1e-6)
     np.testing.assert_allclose(result["errors"]["object_com_mm"]["z"],
                                1e3 * abs(hist["mean"][-1, -1] - 0.016), rtol=1e-6)
-    rc = main(["identify", "--backend", "synthetic", "--unknown", "com:w", "--out",
-               str(tmp_path / "bad"), "--quiet"])
-    assert rc == 2 and not (tmp_path / "bad" / "result.json").exists()
+    _refused(tmp_path, "--unknown", "com:w")
 
 
 def test_a_believed_mass_moves_the_mass_prior_and_not_the_world(tmp_path):
-    out = tmp_path / "believed"
-    rc = main(["identify", "--backend", "synthetic", "--object", "gelatin_box", "--particles",
-               "1000", "--max-iterations", "1", "--seed", "2", "--unknown", "mass",
-               "--object-mass", "0.2", "--out", str(out), "--quiet"])
-    assert rc == 0
-    hist = np.load(out / "history.npz")
+    _, hist = _gelatin_box(tmp_path / "believed", "--particles", "1000", "--max-iterations",
+                           "1", "--unknown", "mass", "--object-mass", "0.2")
     np.testing.assert_allclose(hist["truth_unknowns"], 0.097, rtol=1e-9)  # the spec's
     assert 0.05 <= hist["low"][0, -1] and hist["high"][0, -1] <= 0.8    # 0.25-4x 0.2 kg
     assert hist["high"][0, -1] > 0.4    # the prior about the believed 0.2, not the spec's
-    capsys_rc = main(["identify", "--backend", "synthetic", "--object-mass", "-1", "--out",
-                      str(tmp_path / "bad"), "--quiet"])
-    assert capsys_rc == 2 and not (tmp_path / "bad").exists()
+    _refused(tmp_path, "--object-mass", "-1")
 
 
 def test_a_believed_centre_of_mass_moves_the_com_prior_and_not_the_world(tmp_path):
-    out = tmp_path / "com"
-    rc = main(["identify", "--backend", "synthetic", "--object", "gelatin_box", "--particles",
-               "1000", "--max-iterations", "1", "--seed", "2", "--unknown", "com:x",
-               "--object-com", "0.01", "0", "0.016", "--out", str(out), "--quiet"])
-    assert rc == 0
-    hist = np.load(out / "history.npz")
+    result, hist = _gelatin_box(tmp_path / "com", "--particles", "1000", "--max-iterations",
+                                "1", "--unknown", "com:x", "--object-com", "0.01", "0", "0.016")
     np.testing.assert_allclose(hist["truth_unknowns"], 0.0, atol=1e-12)   # the spec's x
     assert -0.005 <= hist["low"][0, -1] and hist["high"][0, -1] <= 0.025  # 0.01 +- 0.015
-    assert json.loads((out / "result.json").read_text())["settings"]["object_com"] == [
-        0.01, 0.0, 0.016]
-    rc = main(["identify", "--backend", "synthetic", "--object-com", "0", "nan", "0", "--out",
-               str(tmp_path / "bad"), "--quiet"])
-    assert rc == 2 and not (tmp_path / "bad").exists()
+    assert result["settings"]["object_com"] == [0.01, 0.0, 0.016]
+    _refused(tmp_path, "--object-com", "0", "nan", "0")
 
 
 def test_identify_sim_runs_from_rendered_frames(tmp_path):
