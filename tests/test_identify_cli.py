@@ -176,6 +176,23 @@ def test_identify_gives_up_clearly_when_the_tag_is_never_seen():
                  IdentifyConfig())
 
 
+def test_identify_shows_each_unknown_in_its_unit():
+    from vlr.commands.identify import format_table
+    from vlr.identify import Estimate
+
+    unknowns = {"mass": Estimate(0.068, 0.025, 0.098, 0.070),
+                "length:left.proximal": Estimate(0.04, 0.031, 0.05, 0.041),
+                "noise": Estimate(0.5, 0.25, 1.0, 0.5)}
+    result = type("R", (), {"grasp_lost_at": None, "theta": {}, "unknowns": unknowns})()
+    summary = {"converged": False, "iterations": 0, "converged_at": None,
+               "timing": {"filter_s_per_iteration_median": 0.1}}
+    lines = format_table(result, summary, None).splitlines()
+    assert any(line.startswith("mass") and line.endswith("[25 .. 98] g") for line in lines)
+    assert any(line.startswith("length:left.proximal") and "(median 41)" in line
+               and line.endswith(" mm") for line in lines)
+    assert any(line.startswith("noise") and line.endswith("[0.25 .. 1]") for line in lines)
+
+
 def test_identify_says_the_likelihood_and_the_contact_prior_in_effect():
     from vlr.commands.identify import format_table
 

@@ -151,12 +151,18 @@ def write_outputs(out: Path, result, summary: dict, model, truths: list | None =
     write_json_atomic(out / "result.json", summary)
 
 
-# Plot units of the unknowns: (scale from SI, axis label).
-_UNKNOWN_UNITS = {"stiffness": (1.0, "stiffness [N m/rad]"), "length": (1e3, "length [mm]"),
-                  "tendon": (1e-3, "tendon stiffness [N/mm]"),
-                  "noise": (1.0, "factor on the pose scales"),
-                  "mass": (1e3, "object mass [g]"),
-                  "com": (1e3, "centre of mass in O [mm]")}
+# Display units of the unknowns by kind: (scale from SI, what it is, unit).
+_UNKNOWN_UNITS = {"stiffness": (1.0, "stiffness", "N m/rad"), "length": (1e3, "length", "mm"),
+                  "tendon": (1e-3, "tendon stiffness", "N/mm"),
+                  "noise": (1.0, "factor on the pose scales", ""),
+                  "mass": (1e3, "object mass", "g"),
+                  "com": (1e3, "centre of mass in O", "mm")}
+
+
+def unknown_units(spec: str) -> tuple[float, str, str]:
+    """(scale from SI, what it is, unit) to show an unknown ("mass", "length:left.distal",
+    ...) in: grams, millimetres, N/mm; SI for a kind without one."""
+    return _UNKNOWN_UNITS.get(spec.partition(":")[0], (1.0, spec, ""))
 
 
 def _plot(path: Path, hist: dict, model, n: int, k: int, unknowns: list[str] = ()) -> None:
@@ -173,7 +179,8 @@ def _plot(path: Path, hist: dict, model, n: int, k: int, unknowns: list[str] = (
     base = hist["mean"].shape[1] - len(unknowns)
     for j, spec in enumerate(unknowns):
         ax = axes[0, n + j]
-        scale, label = _UNKNOWN_UNITS.get(spec.partition(":")[0], (1.0, spec))
+        scale, what, unit = unknown_units(spec)
+        label = f"{what} [{unit}]" if unit else what
         c = base + j
         ax.fill_between(it, scale * hist["low"][:, c], scale * hist["high"][:, c], alpha=0.3)
         ax.plot(it, scale * hist["mean"][:, c])

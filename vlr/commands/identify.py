@@ -281,6 +281,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def format_table(result, summary: dict, model) -> str:
+    from vlr.results import unknown_units
+
     lines = [f"converged: {summary['converged']} after {summary['iterations']} iterations "
              f"(criterion met at {summary['converged_at']})", "",
              f"{'joint':16s} {'mean [deg]':>11s} {'median [deg]':>13s} "
@@ -292,8 +294,9 @@ def format_table(result, summary: dict, model) -> str:
         lines.append(f"{name:16s} {np.degrees(e.mean):11.2f} {np.degrees(e.median):13.2f} "
                      f"{np.degrees(e.low):10.2f} .. {np.degrees(e.high):7.2f}")
     for name, e in result.unknowns.items():
-        lines.append(f"{name:24s} {e.mean:.5g} (median {e.median:.5g})  "
-                     f"[{e.low:.5g} .. {e.high:.5g}]")
+        k, _, unit = unknown_units(name)
+        lines.append(f"{name:24s} {k * e.mean:.5g} (median {k * e.median:.5g})  "
+                     f"[{k * e.low:.5g} .. {k * e.high:.5g}] {unit}".rstrip())
     if "errors" in summary:
         err = summary["errors"]
         lines.append("")
