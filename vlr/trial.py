@@ -332,7 +332,7 @@ class TrialSettings:
             raise UserError(f"contact_stiffness {self.contact_stiffness} N/m must be > 0")
         if self.object_mass is not None and not (
                 math.isfinite(self.object_mass) and self.object_mass > 0):
-            raise UserError(f"object_mass {self.object_mass} kg must be > 0")
+            raise UserError(f"object_mass {self.object_mass} kg must be finite and > 0")
         if self.limit_stiffness is not None and not (
                 math.isfinite(self.limit_stiffness) and self.limit_stiffness > 0):
             raise UserError(f"limit_stiffness {self.limit_stiffness} N m/rad must be > 0")
