@@ -438,6 +438,7 @@ class MotionModel:
         self._lseg_on = np.ascontiguousarray(model.segments)
         self._prm_settle = self._params(self.config, history=False)
         self._no_roll = np.zeros((1, model.n_fingers, kern.N_RL))
+        self._own_object: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def _params(self, cfg: MotionConfig, history: bool = True) -> np.ndarray:
         """The kernel's parameters; without `history` (a settle) without friction."""
@@ -504,12 +505,15 @@ class MotionModel:
         """(P,) object masses [kg] and (P, 3) centres of mass in O [m]: the particles' own
         (an unknown object), else this model's object for every particle."""
         n = state.n
-        mass = (state.object_mass if state.object_mass is not None
-                else np.full(n, float(self.obj.mass)))
-        com = (state.object_com if state.object_com is not None
-               else np.broadcast_to(np.asarray(self.obj.com, dtype=float), (n, 3)))
-        return (np.ascontiguousarray(mass, dtype=float),
-                np.ascontiguousarray(com, dtype=float))
+        if n not in self._own_object:  # built once per particle count, not every solve
+            self._own_object = {n: (np.full(n, float(self.obj.mass)),
+                                    np.tile(np.asarray(self.obj.com, dtype=float), (n, 1)))}
+        mass, com = self._own_object[n]
+        if state.object_mass is not None:
+            mass = np.ascontiguousarray(state.object_mass, dtype=float)
+        if state.object_com is not None:
+            com = np.ascontiguousarray(state.object_com, dtype=float)
+        return mass, com
 
     def _shared_for(self, cfg: MotionConfig, state: ParticleState) -> tuple:
         """The kernel's shared arrays for `cfg` and `state`: the model's own, but with the
