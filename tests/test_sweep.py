@@ -221,10 +221,19 @@ def test_the_row_gives_the_objects_unknowns_in_grams_and_millimetres():
 
     rec = {"case": "c", "status": "ok", "settings": {},
            "result": {"errors": {"object_mass_g": 12.5, "object_com_mm": {"z": 3.0}},
-                      "errors_median": {"object_mass_g": 10.0}}}
+                      "errors_median": {"object_mass_g": 10.0},
+                      "unknown_estimates": {
+                          "mass": {"mean": 0.06, "median": 0.058, "low": 0.023, "high": 0.096},
+                          "com:z": {"mean": 0.04, "median": 0.041, "low": 0.03, "high": 0.05},
+                          "stiffness:thumb.distal": {"median": 0.04}}}}
     row = _row(rec)
     assert (row["object_mass_g"], row["object_com_mm.z"]) == (12.5, 3.0)
     assert row["object_mass_g_median"] == 10.0
+    # the estimates themselves, whose sign and interval the errors lose
+    assert (row["mass_g.median"], row["mass_g.low"], row["mass_g.high"]) == pytest.approx(
+        (58.0, 23.0, 96.0))
+    assert row["com_z_mm.median"] == pytest.approx(41.0)
+    assert not any(k.startswith("stiffness:") for k in row)
     s = summarize_rows([row])[0]
     assert s["object_mass_g error [g]"] == "12.50"
     assert s["object_mass_g_median error [g]"] == "10.00"

@@ -307,6 +307,20 @@ def _object_unknowns(row: dict[str, Any], errors: dict[str, Any], suffix: str) -
         row[f"object_com_mm{suffix}.{axis}"] = v
 
 
+def _object_estimates(row: dict[str, Any], estimates: dict[str, Any]) -> None:
+    """The object's unknowns' estimates themselves (posterior median and 95% interval), in
+    grams and millimetres: `mass_g.median`, `com_x_mm.low`, ... The errors above lose their
+    sign and whether the interval held the truth."""
+    for spec, e in estimates.items():
+        kind, _, axis = spec.partition(":")
+        if kind not in ("mass", "com") or not isinstance(e, dict):
+            continue
+        name = "mass_g" if kind == "mass" else f"com_{axis}_mm"
+        for stat in ("median", "low", "high"):
+            if e.get(stat) is not None:
+                row[f"{name}.{stat}"] = e[stat] * 1e3
+
+
 def _proximal_links_mm(errors: dict[str, Any]) -> float | None:
     """The mean error over the proximal links alone. The paper's novel-finger unknown is the
     proximal link (METHOD.md 3, 6); the pad's offset along the distal link is ours (our novel
@@ -340,6 +354,7 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
     for joint, v in (errors.get("stiffness") or {}).items():
         row[f"stiffness.{joint}"] = v
     _object_unknowns(row, errors, "")
+    _object_estimates(row, _get(rec, ("result", "unknown_estimates")) or {})
     # The same figures of the posterior median (vlr.filter.Summary), where recorded.
     median = _get(rec, ("result", "errors_median")) or {}
     if median:
