@@ -394,8 +394,9 @@ def open_hand(*, object: str = "apple", hand: str = "modelo", seed: int = 0,
 def scoring_truth(hand: SimHand):
     """The sim's truth in the estimator's terms (vlr.synthetic.Truth), for SCORING only:
     joint angles, pad contact angles and normals, segments (link lengths and the pad centre's
-    z offset), stiffness, tendon stiffness, the POM pose, and the object's mass and centre of
-    mass as the simulator holds them (its body's inertial, in O)."""
+    z offset), stiffness, tendon stiffness, the POM pose, the object's mass and centre of
+    mass as the simulator holds them (its body's inertial, in O) and its surface's curvature
+    (`_true_curvature`)."""
     from vlr.kinematics import angles_from_normals
     from vlr.synthetic import Truth
 
@@ -415,4 +416,13 @@ def scoring_truth(hand: SimHand):
                  tendon=np.full(len(fingers), hand.true_spec.tendon_stiffness),
                  position=t.pom_position, rotation=t.pom_rotation,
                  object_mass=float(hand.model.body_mass[hand._obj_body]),
-                 object_com=np.array(hand.model.body_ipos[hand._obj_body], dtype=float))
+                 object_com=np.array(hand.model.body_ipos[hand._obj_body], dtype=float),
+                 surface_curvature=_true_curvature(hand.object_spec))
+
+
+def _true_curvature(spec) -> float | None:
+    """The curvature of the object the sim built at its contacts [1/m]: its primitive's
+    (a box's faces flat, a sphere's or a cylinder's side 1 / radius), None for a mesh."""
+    from vlr.surface import LocalSurface
+
+    return None if spec.shape == "mesh" else LocalSurface.from_spec(spec).curvature

@@ -5,6 +5,7 @@ import pytest
 from filterpy.monte_carlo import resampling as fp_resampling
 
 from vlr.filter import (
+    CURVATURE_PRIOR_TOP,
     FilterConfig,
     ParticleFilter,
     Summary,
@@ -17,6 +18,7 @@ from vlr.filter import (
 from vlr.kinematics import HandModel
 from vlr.motion import ObjectParams
 from vlr.spec import load_hand
+from vlr.surface import LocalSurface
 from vlr.synthetic import SyntheticConfig, SyntheticWorld, random_action
 
 OBJ = ObjectParams(mass=0.12, com=(0.0, 0.0, 0.03))
@@ -107,6 +109,27 @@ def test_parse_the_objects_unknowns(modelo):
                                  ("com:x", (0.01, -0.01), "low <= high")):
         with pytest.raises(ValueError, match=message):
             parse_unknown(spec, modelo, prior, OBJ)
+
+
+def test_parse_the_curvature(modelo):
+    ball = ObjectParams(mass=0.07, com=(0.0, 0.0, 0.04), surface=LocalSurface("sphere", 0.01))
+    u = parse_unknown("curvature", modelo, obj=ball)
+    assert (u.kind, u.finger, u.prior) == ("curvature", -1, pytest.approx((0.0, 200.0)))
+    u = parse_unknown("curvature:left", modelo, obj=OBJ)     # a plane: up to a 20 mm ball
+    assert (u.finger, u.prior) == (1, (0.0, CURVATURE_PRIOR_TOP))
+    with pytest.raises(ValueError, match="needs the object believed"):
+        parse_unknown("curvature", modelo)
+    for spec, prior, message in (("curvature:pinky", None, "pinky"),
+                                 ("curvature", (-1.0, 20.0), "0 <= low")):
+        with pytest.raises(ValueError, match=message):
+            parse_unknown(spec, modelo, prior, OBJ)
+
+
+def test_a_fingers_curvature_is_sampled_at_its_contact_alone(modelo):
+    pf = _run(modelo, 3, unknowns=("curvature:thumb",))
+    k = pf.state.surface_curvature
+    assert np.all((0.0 <= k[:, 0]) & (k[:, 0] <= CURVATURE_PRIOR_TOP)) and k[:, 0].std() > 0
+    assert np.all(k[:, 1:] == 0.0)   # the believed plane's at the other contacts
 
 
 def test_the_objects_unknowns_are_sampled_within_their_priors(modelo):

@@ -118,6 +118,17 @@ def test_a_believed_centre_of_mass_moves_the_com_prior_and_not_the_world(tmp_pat
     _refused(tmp_path, "--object-com", "0", "nan", "0")
 
 
+def test_identify_scores_the_curvature_and_a_believed_one_moves_its_prior(tmp_path):
+    result, hist = _gelatin_box(tmp_path / "k", "--particles", "1000", "--max-iterations",
+                                "1", "--unknown", "curvature", "--object-curvature", "40")
+    np.testing.assert_allclose(hist["truth_unknowns"], 0.0)   # the world's box stays flat
+    assert 0.0 <= hist["low"][0, -1] and 60.0 < hist["high"][0, -1] <= 80.0  # 0..2 x 40 /m
+    np.testing.assert_allclose(result["errors"]["curvature_per_m"]["all"],
+                               abs(hist["mean"][-1, -1]), rtol=1e-6)
+    assert result["settings"]["object_curvature"] == 40.0
+    _refused(tmp_path, "--object-curvature", "-1")
+
+
 def test_identify_sim_runs_from_rendered_frames(tmp_path):
     out = tmp_path / "sim"
     rc = main(["identify", "--backend", "sim", "--object", "gelatin_box", "--particles",

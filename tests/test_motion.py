@@ -107,7 +107,7 @@ def test_rolling_gradient_and_hessian_match_reference(modelo, surface, exact):
     _, st, u0 = grasp(modelo)
     mm = MotionModel(modelo, obj, replace(ROLL, exact_cylinder=exact))
     roll = mm.rolling_frames(st)[0]
-    assert np.count_nonzero(roll[:, kern.RL_AXIS:].any(axis=1)) == (
+    assert np.count_nonzero(roll[:, kern.RL_AXIS:kern.RL_AXIS + 3].any(axis=1)) == (
         0 if not exact else 2 if surface.axis[2] else 3)
     shake(st, 3, 0.02, 0.02, 2e-4)
     check_derivatives(mm, st, u0, roll, e_rel=1e-10, hess_atol=2e-6)
@@ -483,3 +483,43 @@ def test_a_heavier_particle_sinks_and_the_models_own_object_changes_nothing(mode
     assert copied.object_mass.tolist() == [2 * OBJ.mass, OBJ.mass]
     with pytest.raises(ValueError, match="object_mass"):
         own.put(np.array([0]), copied.take(np.array([0])))
+
+
+@pytest.mark.parametrize("surface, exact, kappa", [
+    (LocalSurface("sphere", 0.04), False, 60.0), (LocalSurface("plane"), False, 30.0),
+    (LocalSurface("cylinder", 0.016, (1.0, 0.0, 0.0)), True, 20.0)])
+def test_a_contacts_own_curvature_matches_reference(modelo, surface, exact, kappa):
+    """The curvature unknown (issue #5, term (b)): each contact's own radius of curvature in
+    the rolling frames, read by the kernel's rolling term, against finite differences of the
+    reference; a plane with a curvature is a sphere."""
+    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=surface)
+    _, st, u0 = grasp(modelo)
+    mm = MotionModel(modelo, obj, replace(ROLL, exact_cylinder=exact))
+    st.hold_surface(obj)
+    st.surface_curvature[0, 1] = kappa
+    roll = mm.rolling_frames(st)[0]
+    np.testing.assert_allclose(roll[:, kern.RL_RHO],
+                               [surface.kernel_radius, 1.0 / kappa, surface.kernel_radius])
+    shake(st, 5, 0.02, 0.02, 2e-4)
+    check_derivatives(mm, st, u0, roll, e_rel=1e-10, hess_atol=2e-6)
+
+
+@pytest.mark.parametrize("surface", [LocalSurface("sphere", 0.04), LocalSurface("plane")])
+def test_the_surfaces_own_curvature_changes_nothing_and_another_rolls_otherwise(modelo,
+                                                                                surface):
+    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=surface)
+    mm, st, u0 = grasp(modelo, n=3, config=ROLL)
+    mm = MotionModel(modelo, obj, ROLL)
+    assert np.all(mm.solve(st, u0)[0] == 0)
+    own = st.copy()
+    st.hold_surface(obj)
+    assert st.surface_curvature.tolist() == [[surface.curvature] * 3] * 3
+    st.surface_curvature[2] = 50.0      # a 20 mm ball: its contacts roll further
+    u = u0 + np.array([3e-4, -2e-4, 1e-4])
+    assert np.all(mm.solve(st, u, u_from=u0)[0] == 0)
+    assert np.all(mm.solve(own, u, u_from=u0)[0] == 0)
+    # Particle 0 holds the surface's curvature as its own: the same numbers as without.
+    for name in ("theta", "pos", "anchors", "normals"):
+        np.testing.assert_array_equal(getattr(st, name)[0], getattr(own, name)[0])
+    assert np.abs(st.anchors[2] - st.anchors[0]).max() > 1e-6
+    assert st.take(np.array([2])).surface_curvature.tolist() == [[50.0] * 3]

@@ -41,3 +41,18 @@ def test_a_pad_moved_along_the_axis_keeps_its_gap_on_a_cylinder_only(along):
     opened = pad_gaps(pad, *sphere, RHO + PAD)[0, 0] + sink
     d = RHO + PAD - sink
     assert opened == pytest.approx(np.hypot(d, along) - d, rel=1e-9, abs=1e-15)
+
+
+def test_a_surface_with_another_curvature():
+    from vlr.surface import FLAT_CURVATURE, contact_radii
+
+    assert LocalSurface("sphere", 0.04).curvature == pytest.approx(25.0)
+    assert LocalSurface("plane").curvature == 0.0
+    assert LocalSurface("plane").with_curvature(25.0) == LocalSurface("sphere", 0.04)
+    assert CYLINDER.with_curvature(50.0) == LocalSurface("cylinder", 0.02, CYLINDER.axis)
+    assert LocalSurface("sphere", 0.04).with_curvature(0.0).kind == "plane"
+    with pytest.raises(ValueError, match="-1"):
+        CYLINDER.with_curvature(-1.0)
+    # at or below a plane's curvature, the plane's 10 m
+    np.testing.assert_allclose(contact_radii(np.array([0.0, FLAT_CURVATURE, 20.0])),
+                               [10.0, 10.0, 0.05])

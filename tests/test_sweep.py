@@ -240,6 +240,19 @@ def test_the_row_gives_the_objects_unknowns_in_grams_and_millimetres():
     assert s["object_com_mm.z error [mm]"] == "3.00"
 
 
+def test_the_row_gives_the_curvature_in_per_metre():
+    from vlr.sweep import _row, summarize_rows
+
+    rec = {"case": "c", "status": "ok", "settings": {},
+           "result": {"errors": {"curvature_per_m": {"all": 4.5}},
+                      "unknown_estimates": {
+                          "curvature": {"median": 22.0, "low": 12.0, "high": 31.0}}}}
+    row = _row(rec)
+    assert row["curvature_per_m.all"] == 4.5
+    assert (row["curvature_all.median"], row["curvature_all.low"]) == (22.0, 12.0)
+    assert summarize_rows([row])[0]["curvature_per_m.all error [1/m]"] == "4.50"
+
+
 def test_a_grid_setting_splits_the_summary_instead_of_being_averaged(tmp_path):
     from vlr.sweep import varying_settings, write_tables
 

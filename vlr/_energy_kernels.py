@@ -26,18 +26,19 @@ N_TERMS = 7
 OK, NONFINITE, NO_CONVERGENCE, JUMP, INACTIVE = 0, 1, 2, 3, 4
 
 # Indices into the float parameter vector `prm`.
-(P_KC, P_KLIM, P_TOL_TH, P_TOL_P, P_MAX_DTH, P_MAX_DP, P_JUMP_TH, P_JUMP_P, P_MU0, P_RHO,
- P_KSPIN, P_SLIDE_FRICTION, P_SPIN_FRICTION, P_SPIN_EPS) = range(14)
-N_PRM = 14
+(P_KC, P_KLIM, P_TOL_TH, P_TOL_P, P_MAX_DTH, P_MAX_DP, P_JUMP_TH, P_JUMP_P, P_MU0,
+ P_KSPIN, P_SLIDE_FRICTION, P_SPIN_FRICTION, P_SPIN_EPS) = range(13)
+N_PRM = 13
 # Layout of a rolling frame (one per contact): local centre of curvature in O (3), contact
 # normal in the palm frame (3), the finger's summed joint angles (1), the object rotation
 # R_PO (9, row-major) at the start of the solve, the contact's normal force then (1) [N]
 # (it sets the friction's limits) and the spin torque the pad holds (1) [N m]
 # (`MotionConfig.spin_memory`), and for a contact on a cylinder's side the cylinder's axis in
 # O (3; zero elsewhere: the local surface is then the sphere about the centre;
-# `MotionConfig.exact_cylinder`).
-(RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, RL_FORCE, RL_SPIN_TORQUE, RL_AXIS,
- N_RL) = 0, 3, 6, 7, 16, 17, 18, 21
+# `MotionConfig.exact_cylinder`), and the local surface's radius of curvature rho (1) [m]:
+# the contact's own, so that a particle can carry an unknown curvature (issue #5, term (b)).
+(RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, RL_FORCE, RL_SPIN_TORQUE, RL_AXIS, RL_RHO,
+ N_RL) = 0, 3, 6, 7, 16, 17, 18, 21, 22
 # A stored spin torque's share of its cone is held below this (`spin_offset`).
 SPIN_MEMORY_CLIP = 0.99
 
@@ -356,8 +357,8 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                         if m != j:
                             A[i, m, j] += h
         # Rolling (METHOD.md 8.2): the pad sphere touches the object's local sphere (centre
-        # rl[i, :3] in O, radius rho; one equation) and the previous contact points do not
-        # slip tangentially to the normal rl[i, 3:] (two), as stiff penalties.
+        # rl[i, :3] in O, radius rl[i, RL_RHO]; one equation) and the previous contact points
+        # do not slip tangentially to the normal rl[i, 3:] (two), as stiff penalties.
         if flags[CONTACTS] != 0 and flags[ROLLING] != 0:
             gam = vk[1]
             ax, ay, az = anc[i, 0], anc[i, 1], anc[i, 2]
@@ -437,7 +438,7 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
             oz = rl[i, 2] + t_ax * rl[i, RL_AXIS + 2]
             uv = (u0, u1, u2)
             dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
-            reach = prm[P_RHO] + pad_r[i]
+            reach = rl[i, RL_RHO] + pad_r[i]
             g = dist - reach
             e += 0.5 * kc * g * g
             dv = (d0 / dist, d1 / dist, d2 / dist)
@@ -509,7 +510,7 @@ def _normal_force(i, th, seg, nrm, rl, p, R, base_pos, base_rot, pad_xy, pad_r, 
     d0, d1, d2 = _separation(base_pos[i], base_rot[i], pad_xy[i, 0], py, pz, p, R,
                              rl[i, 0], rl[i, 1], rl[i, 2])
     d0, d1, d2 = _to_axis(d0, d1, d2, R, rl, i)[:3]
-    g = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - (prm[P_RHO] + pad_r[i])
+    g = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - (rl[i, RL_RHO] + pad_r[i])
     return prm[P_KC] * max(0.0, -g)
 
 

@@ -10,8 +10,9 @@ Sampled dimensions ("dims"), in this order: joint angles theta (N*K) [rad]; the 
 each pad as two angles (alpha, beta) per finger [rad] (`vlr.kinematics.normals_from_angles`);
 then the unknown parameters asked for, e.g. "stiffness:thumb.distal" [N m/rad],
 "length:left.proximal" [m], "tendon" or "tendon:thumb" [N/m], the object's "mass" [kg] or
-a coordinate of its centre of mass in O, "com:z" [m] (issue #5, term (b)). Known parameters
-are not sampled (METHOD.md 3).
+a coordinate of its centre of mass in O, "com:z" [m], and the local curvature of its surface
+at the contacts, "curvature" or at one finger's, "curvature:thumb" [1/m] (issue #5, term
+(b)). Known parameters are not sampled (METHOD.md 3).
 """
 
 from __future__ import annotations
@@ -54,6 +55,10 @@ NOISE_PRIOR = (0.25, 1.0)
 MASS_PRIOR_FACTORS = (0.25, 4.0)
 COM_PRIOR_HALF_WIDTH = 0.015
 COM_AXES = ("x", "y", "z")
+# The curvature's (ours): uniform on [0, 2 kappa] about the believed surface's kappa = 1/rho,
+# and up to at least 50 /m (a 20 mm radius, the tightest of the test objects' bar the
+# screwdriver's handle): a believed plane may be a ball, a believed ball may be flat.
+CURVATURE_PRIOR_TOP = 50.0
 
 
 @dataclass(frozen=True)
@@ -62,9 +67,9 @@ class Unknown:
 
     Attributes:
         spec: the spec string, e.g. "stiffness:thumb.distal".
-        kind: "stiffness" | "length" | "tendon" | "noise" | "mass" | "com".
-        finger: finger index, or -1 for all fingers ("tendon", "noise") and the object's
-            unknowns ("mass", "com").
+        kind: "stiffness" | "length" | "tendon" | "noise" | "mass" | "com" | "curvature".
+        finger: finger index, or -1 for all fingers ("tendon", "noise", "curvature": one
+            curvature at every contact) and the object's "mass" and "com".
         joint: joint index (stiffness, length), the axis of O ("com": 0, 1, 2), else -1.
         prior: (low, high) of the uniform prior [SI units].
     """
@@ -80,19 +85,25 @@ def parse_unknown(spec: str, model: HandModel,
                   prior: tuple[float, float] | None = None,
                   obj: ObjectParams | None = None) -> Unknown:
     """Parse "stiffness:FINGER.JOINT", "length:FINGER.JOINT", "tendon", "tendon:FINGER",
-    "noise", or the object's "mass" and "com:x|y|z" (which need `obj`, the object believed).
+    "noise", or the object's "mass", "com:x|y|z", "curvature" and "curvature:FINGER" (which
+    need `obj`, the object believed).
 
     Default priors (ours): stiffness 0.25-4x nominal; length 0.5-1.3x nominal (a replaced
     finger may be much shorter: NF1 is 40 mm against 62 mm); tendon stiffness 0.5-2x nominal;
     noise, the factor on the likelihood's pose scales (`vlr.observation`, "The model error's
     size"), `NOISE_PRIOR`: the configured scales are its top, set for the worst object;
     the object's mass `MASS_PRIOR_FACTORS` times the believed, a coordinate of its centre of
-    mass the believed +- `COM_PRIOR_HALF_WIDTH` (the weight's potential, Eq. 9).
+    mass the believed +- `COM_PRIOR_HALF_WIDTH` (the weight's potential, Eq. 9); the local
+    curvature at the contacts (the rolling term's rho, METHOD.md 8.2) 0 to the larger of
+    twice the believed and `CURVATURE_PRIOR_TOP`. A curvature keeps the believed surface's
+    kind: a cylinder's is across its axis, and a believed plane with a curvature is a sphere.
     A "distal" length is the pad centre's offset along the distal link (kinematics.py).
     """
     kind, _, rest = spec.partition(":")
     if kind in ("mass", "com"):
         return _parse_object_unknown(spec, kind, rest, prior, obj)
+    if kind == "curvature":
+        return _parse_curvature(spec, rest, model, prior, obj)
     if kind == "noise":
         if rest:
             raise ValueError(f"unknown parameter spec {spec!r}: 'noise' takes no finger")
@@ -108,7 +119,8 @@ def parse_unknown(spec: str, model: HandModel,
         return Unknown(spec, kind, finger, -1, (float(lo), float(hi)))
     if kind not in ("stiffness", "length") or "." not in rest:
         raise ValueError(f"unknown parameter spec {spec!r}; use stiffness:FINGER.JOINT, "
-                         "length:FINGER.JOINT, tendon, tendon:FINGER, noise, mass or com:x|y|z")
+                         "length:FINGER.JOINT, tendon, tendon:FINGER, noise, mass, com:x|y|z, "
+                         "curvature or curvature:FINGER")
     fname, jname = rest.split(".", 1)
     i, k = model.finger_index(fname), model.joint_index(jname)
     if kind == "stiffness":
@@ -146,6 +158,20 @@ def _parse_object_unknown(spec: str, kind: str, rest: str, prior: tuple[float, f
     return Unknown(spec, kind, -1, axis, (float(lo), float(hi)))
 
 
+def _parse_curvature(spec: str, rest: str, model: HandModel,
+                     prior: tuple[float, float] | None, obj: ObjectParams | None) -> Unknown:
+    """The object's local "curvature" at every contact or at one finger's (`parse_unknown`)."""
+    if obj is None:
+        raise ValueError(f"unknown parameter spec {spec!r}: the curvature needs the object "
+                         "believed (its surface)")
+    finger = model.finger_index(rest) if rest else -1
+    lo, hi = prior or (0.0, max(2.0 * obj.surface.curvature, CURVATURE_PRIOR_TOP))
+    if not 0 <= lo <= hi < math.inf:
+        raise ValueError(f"{spec} prior ({lo}, {hi}) [1/m] must satisfy 0 <= low <= high, "
+                         "both finite")
+    return Unknown(spec, "curvature", finger, -1, (float(lo), float(hi)))
+
+
 def _get_unknown(state: ParticleState, u: Unknown) -> np.ndarray:
     if u.kind == "noise":
         return state.noise
@@ -153,6 +179,8 @@ def _get_unknown(state: ParticleState, u: Unknown) -> np.ndarray:
         return state.object_mass
     if u.kind == "com":
         return state.object_com[:, u.joint]
+    if u.kind == "curvature":
+        return state.surface_curvature[:, max(u.finger, 0)]
     if u.kind == "stiffness":
         return state.stiffness[:, u.finger, u.joint]
     if u.kind == "length":
@@ -167,6 +195,11 @@ def _set_unknown(state: ParticleState, u: Unknown, values: np.ndarray) -> None:
         state.object_mass[:] = values
     elif u.kind == "com":
         state.object_com[:, u.joint] = values
+    elif u.kind == "curvature":
+        if u.finger < 0:
+            state.surface_curvature[:, :] = values[:, None]
+        else:
+            state.surface_curvature[:, u.finger] = values
     elif u.kind == "stiffness":
         state.stiffness[:, u.finger, u.joint] = values
     elif u.kind == "length":
@@ -450,9 +483,12 @@ class ParticleFilter:
             _set_unknown(state, u, x[:, n_th + 2 * nf + j])
 
     def _hold_object(self, state: ParticleState) -> None:
-        """With the object's unknowns, each particle carries its own object."""
+        """With the object's unknowns, each particle carries its own object (mass and centre
+        of mass, or surface curvature)."""
         if any(u.kind in ("mass", "com") for u in self.unknowns):
             state.hold_object(self.motion.obj)
+        if any(u.kind == "curvature" for u in self.unknowns):
+            state.hold_surface(self.motion.obj)
 
     # ---- Algorithm 1
 

@@ -151,6 +151,8 @@ def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
     for j, u in enumerate(pf.unknowns):
         if u.kind == "noise":  # the likelihood's own scale: no true value to score
             continue
+        if u.kind == "curvature" and getattr(truth, "surface_curvature", None) is None:
+            continue  # a mesh object: the world does not say
         if u.kind == "stiffness":
             true = truth.stiffness[u.finger, u.joint]
         elif u.kind == "length":
@@ -159,6 +161,8 @@ def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
             true = truth.object_mass
         elif u.kind == "com":
             true = truth.object_com[u.joint]
+        elif u.kind == "curvature":
+            true = truth.surface_curvature
         else:
             true = truth.tendon[max(u.finger, 0)]
         ue[u.spec] = float(post.mean[base + j] - true)

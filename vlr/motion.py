@@ -40,7 +40,14 @@ import numpy as np
 from vlr import _energy_kernels as kern
 from vlr.kinematics import HandModel, contact_in_distal, contact_points, plane_rotation
 from vlr.spec import ObjectSpec
-from vlr.surface import LocalSurface, local_centres, pad_gaps, roll_contacts, surface_normals
+from vlr.surface import (
+    LocalSurface,
+    contact_radii,
+    local_centres,
+    pad_gaps,
+    roll_contacts,
+    surface_normals,
+)
 
 __all__ = [
     "TERMS",
@@ -286,6 +293,9 @@ class ParticleState:
             `vlr.filter.parse_unknown`); None: the motion model's `ObjectParams`.
         object_com: (P, 3) the object's centre of mass in O [m] when an unknown ("com:x",
             ...); None: the motion model's.
+        surface_curvature: (P, N) the object's local curvature 1 / rho at each contact
+            [1/m] when an unknown ("curvature", "curvature:FINGER"); None: the motion
+            model's `LocalSurface` (`vlr.surface.contact_radii`).
     """
 
     theta: np.ndarray
@@ -301,6 +311,7 @@ class ParticleState:
     spin_torque: np.ndarray
     object_mass: np.ndarray | None = None
     object_com: np.ndarray | None = None
+    surface_curvature: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -332,6 +343,12 @@ class ParticleState:
             self.object_mass = np.full(self.n, float(obj.mass))
         if self.object_com is None:
             self.object_com = np.tile(np.asarray(obj.com, dtype=float), (self.n, 1))
+
+    def hold_surface(self, obj: ObjectParams) -> None:
+        """Give every contact of every particle its own local curvature, `obj`'s surface's
+        to start (for the curvature unknowns, `vlr.filter.parse_unknown`)."""
+        if self.surface_curvature is None:
+            self.surface_curvature = np.full(self.theta.shape[:2], obj.surface.curvature)
 
     @classmethod
     def nominal(cls, model: HandModel, n: int, theta: np.ndarray, normals: np.ndarray,
@@ -365,6 +382,8 @@ class ParticleState:
         if getattr(truth, "object_mass", None) is not None:
             st.object_mass = np.array([float(truth.object_mass)])
             st.object_com = np.asarray(truth.object_com, dtype=float).reshape(1, 3).copy()
+        if getattr(truth, "surface_curvature", None) is not None:
+            st.surface_curvature = np.full((1, model.n_fingers), float(truth.surface_curvature))
         st.anchor_to_pose(model)
         return st
 
@@ -444,9 +463,7 @@ class MotionModel:
         """The kernel's parameters; without `history` (a settle) without friction."""
         if not history:
             cfg = replace(cfg, slide_friction=math.inf, spin_friction=0.0)
-        prm = cfg.params()
-        prm[kern.P_RHO] = self.obj.surface.kernel_radius
-        return prm
+        return cfg.params()
 
     def rolling_frames(self, state: ParticleState, normals_o: np.ndarray | None = None,
                        forces: bool = True, exact_cylinder: bool | None = None) -> np.ndarray:
@@ -457,15 +474,17 @@ class MotionModel:
         object's outward normal at the contact, in O), the finger's summed joint angles, the
         object's rotation (for the spin term), the contact's normal force
         (`normal_forces`; it sets the friction's limits; 0 if not `forces`) and the spin
-        torque the pad holds (`ParticleState.spin_torque`). `normals_o`: m if already
-        computed (`vlr.surface.surface_normals`)."""
+        torque the pad holds (`ParticleState.spin_torque`), and the local radius of curvature
+        (`contact_rho`). `normals_o`: m if already computed (`vlr.surface.surface_normals`)."""
         m = (surface_normals(self.model, state.theta, state.normals, state.rot)
              if normals_o is None else normals_o)
         out = np.empty(m.shape[:2] + (kern.N_RL,))
+        rho = self.contact_rho(state)
         (out[..., kern.RL_CENTRE:kern.RL_CENTRE + 3],
          out[..., kern.RL_AXIS:kern.RL_AXIS + 3]) = local_centres(
             self.obj.surface, state.anchors, m,
-            self.config.exact_cylinder if exact_cylinder is None else exact_cylinder)
+            self.config.exact_cylinder if exact_cylinder is None else exact_cylinder, rho)
+        out[..., kern.RL_RHO] = self.obj.surface.kernel_radius if rho is None else rho
         out[..., kern.RL_NORMAL:kern.RL_NORMAL + 3] = np.einsum("pab,pnb->pna", state.rot, m)
         out[..., kern.RL_PHI] = state.theta.sum(axis=-1)
         out[..., kern.RL_ROT:kern.RL_ROT + 9] = state.rot.reshape(-1, 1, 9)
@@ -491,15 +510,21 @@ class MotionModel:
     def normal_forces(self, state: ParticleState, frames: np.ndarray) -> np.ndarray:
         """(P, N) each contact's normal force in the rolling term [N]: k_c times how far the
         pad sphere sinks into the object's local sphere or cylinder (the rolling `frames`'
-        centres and axes in O, radius rho), 0 where they part."""
+        centres and axes in O, radii rho), 0 where they part."""
         centre = contact_points(self.model, state.theta, np.zeros_like(state.normals),
                                 state.segments)
         local = state.pos[:, None, :] + np.einsum(
             "pab,pnb->pna", state.rot, frames[..., kern.RL_CENTRE:kern.RL_CENTRE + 3])
         axes = np.einsum("pab,pnb->pna", state.rot, frames[..., kern.RL_AXIS:kern.RL_AXIS + 3])
-        gap = pad_gaps(centre, local, axes,
-                       self.obj.surface.kernel_radius + self.model.pad_radius)
+        gap = pad_gaps(centre, local, axes, frames[..., kern.RL_RHO] + self.model.pad_radius)
         return self.config.contact_stiffness * np.maximum(0.0, -gap)
+
+    def contact_rho(self, state: ParticleState) -> np.ndarray | None:
+        """(P, N) each contact's radius of curvature [m] when the particles carry their own
+        curvature (`ParticleState.surface_curvature`), else None: this model's surface."""
+        if state.surface_curvature is None:
+            return None
+        return contact_radii(state.surface_curvature)
 
     def object_arrays(self, state: ParticleState) -> tuple[np.ndarray, np.ndarray]:
         """(P,) object masses [kg] and (P, 3) centres of mass in O [m]: the particles' own
@@ -662,11 +687,12 @@ class MotionModel:
         ok = state.valid
         if not ok.any():
             return
+        rho = self.contact_rho(state)
         n, a = roll_contacts(self.model, self.obj.surface, state.theta[ok], state.normals[ok],
                              state.anchors[ok], state.pos[ok], state.rot[ok],
                              state.segments[ok], normals_before[ok], slide_friction,
                              self.config.exact_cylinder if exact_cylinder is None
-                             else exact_cylinder)
+                             else exact_cylinder, None if rho is None else rho[ok])
         if ok.all():
             state.normals, state.anchors = n, a
         else:
@@ -728,7 +754,7 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
     (Eq. 6, 7 compliant, 8 penalty or rolling with the (N, 21) frames `roll` and the pads'
     friction, limits, gravity). The independent reference the vectorised kernel is tested
     against."""
-    m, cfg, obj = motion.model, motion.config, motion.obj
+    m, cfg = motion.model, motion.config
     if roll is None and cfg.rolling:
         roll = motion.rolling_frames(state)[q]
     g = np.asarray(cfg.gravity, dtype=float)
@@ -767,7 +793,7 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
         centre = contact_points(m, theta, np.zeros_like(state.normals[q]), state.segments[q])
         gap = pad_gaps(centre, pos + roll[:, kern.RL_CENTRE:kern.RL_CENTRE + 3] @ rot.T,
                        roll[:, kern.RL_AXIS:kern.RL_AXIS + 3] @ rot.T,
-                       obj.surface.kernel_radius + m.pad_radius)
+                       roll[:, kern.RL_RHO] + m.pad_radius)
         kc = cfg.contact_stiffness
         e += 0.5 * kc * np.sum(gap**2)
         spin = np.zeros(len(roll))

@@ -92,7 +92,7 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
 
 def _errors(err: np.ndarray, unknown_error: dict[str, float], model) -> dict:
     """The error figures of one point estimate: joint errors [deg] (fingers x joints) and
-    each unknown's signed error (SI units)."""
+    each unknown's absolute error (lengths, mass and centre of mass in mm and g)."""
     errors: dict = {"proximal_deg_mean": float(err[:, 0].mean()),
                     "distal_deg_mean": float(err[:, 1:].mean()),
                     # The paper's "joints" figure of the novel-finger rows: every joint.
@@ -110,6 +110,8 @@ def _errors(err: np.ndarray, unknown_error: dict[str, float], model) -> dict:
             errors["object_mass_g"] = abs(e) * 1e3
         elif kind == "com":
             errors.setdefault("object_com_mm", {})[rest] = abs(e) * 1e3
+        elif kind == "curvature":  # "all": one curvature at every contact
+            errors.setdefault("curvature_per_m", {})[rest or "all"] = abs(e)
     if lengths:
         errors["link_length_mm"] = {f: float(np.mean(v)) for f, v in lengths.items()}
     if stiff:
@@ -156,7 +158,8 @@ _UNKNOWN_UNITS = {"stiffness": (1.0, "stiffness", "N m/rad"), "length": (1e3, "l
                   "tendon": (1e-3, "tendon stiffness", "N/mm"),
                   "noise": (1.0, "factor on the pose scales", ""),
                   "mass": (1e3, "object mass", "g"),
-                  "com": (1e3, "centre of mass in O", "mm")}
+                  "com": (1e3, "centre of mass in O", "mm"),
+                  "curvature": (1.0, "surface curvature", "1/m")}
 
 
 def unknown_units(spec: str) -> tuple[float, str, str]:

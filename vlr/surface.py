@@ -31,9 +31,15 @@ import numpy as np
 from vlr.kinematics import HandModel, contact_points, plane_rotation
 from vlr.spec import ObjectSpec
 
-__all__ = ["LocalSurface", "surface_normals", "local_centres", "pad_gaps", "roll_contacts"]
+__all__ = ["LocalSurface", "surface_normals", "local_centres", "pad_gaps", "roll_contacts",
+           "contact_radii", "FLAT_CURVATURE"]
 
 KINDS = ("plane", "sphere", "cylinder")
+
+# The curvature the rolling term gives a plane [1/m]: a sphere of 10 m is flat within 0.1% of
+# a pad's travel, and an infinite radius has no centre to hold fixed. An unknown curvature
+# at or below it is a plane.
+FLAT_CURVATURE = 0.1
 
 
 @dataclass(frozen=True)
@@ -66,8 +72,23 @@ class LocalSurface:
         sphere's own, a cylinder's (a sphere of its radius: exact around the axis, too
         curved along it, unless `MotionConfig.exact_cylinder` holds the pads to the axis;
         `local_centres`), and 10 m for a plane (flat within 0.1% of a pad's travel; an
-        infinite radius has no centre to hold fixed)."""
-        return 10.0 if self.kind == "plane" else self.radius
+        infinite radius has no centre to hold fixed: `FLAT_CURVATURE`)."""
+        return 1.0 / FLAT_CURVATURE if self.kind == "plane" else self.radius
+
+    @property
+    def curvature(self) -> float:
+        """1 / rho [1/m]: 0 for a plane; a cylinder's across its axis."""
+        return 0.0 if self.kind == "plane" else 1.0 / self.radius
+
+    def with_curvature(self, kappa: float) -> LocalSurface:
+        """This surface with curvature `kappa` [1/m]: a plane at or below `FLAT_CURVATURE`;
+        a cylinder keeps its axis; a plane bent is a sphere."""
+        if not (math.isfinite(kappa) and kappa >= 0):
+            raise ValueError(f"curvature {kappa!r} 1/m must be finite and >= 0")
+        if kappa <= FLAT_CURVATURE:
+            return LocalSurface("plane")
+        kind = "cylinder" if self.kind == "cylinder" else "sphere"
+        return LocalSurface(kind, 1.0 / kappa, self.axis)
 
     @classmethod
     def from_spec(cls, spec: ObjectSpec) -> LocalSurface:
@@ -108,20 +129,30 @@ def _side_normals(surface: LocalSurface, m: np.ndarray) -> tuple[np.ndarray, np.
 
 
 def local_centres(surface: LocalSurface, anchors: np.ndarray, m: np.ndarray,
-                  exact_cylinder: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                  exact_cylinder: bool = False,
+                  rho: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """What the motion model's rolling term holds each pad to, in O: the local centre of
     curvature a - rho m (the local sphere's, `LocalSurface.kernel_radius`) and, for a contact
     on a cylinder's side with `exact_cylinder`, the cylinder's axis through a - rho m_side
     (else a zero axis: the sphere). (P, N, 3) each; `m` the object's outward normals at the
-    contacts `anchors` (`surface_normals`)."""
+    contacts `anchors` (`surface_normals`); `rho` (P, N) each contact's own radius of
+    curvature [m] (an unknown curvature, `contact_radii`), None: the surface's."""
     axes = np.zeros_like(m)
+    r = surface.kernel_radius if rho is None else np.asarray(rho, dtype=float)[..., None]
     if not (exact_cylinder and surface.kind == "cylinder"):
-        return anchors - surface.kernel_radius * m, axes
+        return anchors - r * m, axes
     m_side, on_side = _side_normals(surface, m)
-    centres = np.where(on_side, anchors - surface.radius * m_side,
-                       anchors - surface.kernel_radius * m)
+    r_side = surface.radius if rho is None else r
+    centres = np.where(on_side, anchors - r_side * m_side, anchors - r * m)
     axes[...] = np.where(on_side, np.asarray(surface.axis, dtype=float), 0.0)
     return centres, axes
+
+
+def contact_radii(curvature: np.ndarray) -> np.ndarray:
+    """Each contact's radius of curvature in the rolling term [m] from its curvature [1/m]
+    (`ParticleState.surface_curvature`): 1 / kappa, a plane's (`FLAT_CURVATURE`) at or below
+    it."""
+    return 1.0 / np.maximum(np.asarray(curvature, dtype=float), FLAT_CURVATURE)
 
 
 def pad_gaps(centre: np.ndarray, local: np.ndarray, axes: np.ndarray,
@@ -137,8 +168,8 @@ def pad_gaps(centre: np.ndarray, local: np.ndarray, axes: np.ndarray,
 def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
                   normals: np.ndarray, anchors: np.ndarray, pos: np.ndarray, rot: np.ndarray,
                   segments: np.ndarray, normals_before: np.ndarray,
-                  slide_friction: float = math.inf,
-                  exact_cylinder: bool = False) -> tuple[np.ndarray, np.ndarray]:
+                  slide_friction: float = math.inf, exact_cylinder: bool = False,
+                  rho: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Move each contact to where the pad now touches the object's local surface.
 
     Args:
@@ -152,6 +183,9 @@ def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
             contact slides.
         exact_cylinder: the rolling term held a cylinder's pads to its axis, not to a
             sphere of its radius (`MotionConfig.exact_cylinder`): its gap is read alike.
+        rho: (P, N) each contact's own radius of curvature [m] (`contact_radii`: an unknown
+            curvature; a plane of the surface's kind becomes a sphere of it), None: the
+            surface's. A contact as flat as a plane's (`FLAT_CURVATURE`) keeps its normal.
     Returns:
         (normals, anchors): the new pad normals in D and contact points in O. The POM pose
         is unchanged, and so are the rolling term's residuals (the pad-to-surface gap and the
@@ -166,27 +200,30 @@ def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
     # The residuals as the motion model's rolling term sees them (its local sphere).
     d = contact - anchors
     tangential = d - np.sum(d * normals_before, axis=-1, keepdims=True) * normals_before
-    local, axes = local_centres(surface, anchors, normals_before, exact_cylinder)
-    gap = pad_gaps(centre, local, axes, surface.kernel_radius + radius[..., 0])[..., None]
+    local, axes = local_centres(surface, anchors, normals_before, exact_cylinder, rho)
+    reach = surface.kernel_radius if rho is None else np.asarray(rho, dtype=float)
+    gap = pad_gaps(centre, local, axes, reach + radius[..., 0])[..., None]
     if math.isfinite(slide_friction):
         cap = slide_friction * np.maximum(0.0, -gap)
         t = np.linalg.norm(tangential, axis=-1, keepdims=True)
         tangential = tangential * np.where(t > cap, cap / np.where(t > 0, t, 1.0), 1.0)
     m = normals_before
-    if surface.kind == "plane":
+    if surface.kind == "plane" and rho is None:
         out = m
     else:
-        rho = surface.radius
+        r = surface.radius if rho is None else np.asarray(rho, dtype=float)[..., None]
         if surface.kind == "cylinder":
             axis = np.asarray(surface.axis, dtype=float)
             m_side, on_side = _side_normals(surface, m)    # an end face is flat
-            d = centre - (anchors - rho * m_side)    # from the local axis of curvature
+            d = centre - (anchors - r * m_side)    # from the local axis of curvature
             d = d - np.einsum("pni,i->pn", d, axis)[..., None] * axis
             d_len = np.linalg.norm(d, axis=-1, keepdims=True)
             out = np.where(on_side, d / np.where(d_len > 0, d_len, 1.0), m)
         else:
-            d = centre - (anchors - rho * m)    # from the local centre of curvature
+            d = centre - (anchors - r * m)    # from the local centre of curvature
             out = d / np.linalg.norm(d, axis=-1, keepdims=True)
+        if rho is not None:
+            out = np.where(r >= 1.0 / FLAT_CURVATURE, m, out)
     new_anchors = centre - (radius + gap) * out - tangential
     n_palm = -np.einsum("pab,pnb->pna", rot, out)
     new_normals = np.einsum("pnba,pnb->pna", _distal_rotations(model, theta), n_palm)

@@ -299,26 +299,30 @@ def _at_paper_budget(rec: dict[str, Any], key: str) -> Any:
 
 
 def _object_unknowns(row: dict[str, Any], errors: dict[str, Any], suffix: str) -> None:
-    """The object's unknowns' absolute errors (`vlr.results`): its mass [g] and each
-    coordinate of its centre of mass asked for [mm]."""
+    """The object's unknowns' absolute errors (`vlr.results`): its mass [g], each
+    coordinate of its centre of mass asked for [mm] and its surface's curvature [1/m], at
+    every contact ("all") or at a finger's."""
     if errors.get("object_mass_g") is not None:
         row[f"object_mass_g{suffix}"] = errors["object_mass_g"]
     for axis, v in (errors.get("object_com_mm") or {}).items():
         row[f"object_com_mm{suffix}.{axis}"] = v
+    for where, v in (errors.get("curvature_per_m") or {}).items():
+        row[f"curvature_per_m{suffix}.{where}"] = v
 
 
 def _object_estimates(row: dict[str, Any], estimates: dict[str, Any]) -> None:
     """The object's unknowns' estimates themselves (posterior median and 95% interval), in
-    grams and millimetres: `mass_g.median`, `com_x_mm.low`, ... The errors above lose their
-    sign and whether the interval held the truth."""
+    grams, millimetres and 1/m: `mass_g.median`, `com_x_mm.low`, `curvature_all.high`, ...
+    The errors above lose their sign and whether the interval held the truth."""
     for spec, e in estimates.items():
-        kind, _, axis = spec.partition(":")
-        if kind not in ("mass", "com") or not isinstance(e, dict):
+        kind, _, where = spec.partition(":")
+        if kind not in ("mass", "com", "curvature") or not isinstance(e, dict):
             continue
-        name = "mass_g" if kind == "mass" else f"com_{axis}_mm"
+        name, scale = {"mass": ("mass_g", 1e3), "com": (f"com_{where}_mm", 1e3),
+                       "curvature": (f"curvature_{where or 'all'}", 1.0)}[kind]
         for stat in ("median", "low", "high"):
             if e.get(stat) is not None:
-                row[f"{name}.{stat}"] = e[stat] * 1e3
+                row[f"{name}.{stat}"] = e[stat] * scale
 
 
 def _proximal_links_mm(errors: dict[str, Any]) -> float | None:
@@ -453,11 +457,12 @@ def summarize_rows(rows: list[dict[str, Any]],
             s[title] = _fmt([r.get(col) for r in ok], digits)
         extra = sorted({k for r in ok for k in r if k.startswith(
             ("length_mm.", "stiffness.", "stiffness_median.", "object_mass_g",
-             "object_com_mm"))})
+             "object_com_mm", "curvature_per_m"))})
         for col in extra:
             digits = 4 if col.startswith("stiffness") else 2
             unit = ("N m/rad" if col.startswith("stiffness")
-                    else "g" if col.startswith("object_mass") else "mm")
+                    else "g" if col.startswith("object_mass")
+                    else "1/m" if col.startswith("curvature") else "mm")
             s[f"{col} error [{unit}]"] = _fmt([r.get(col) for r in ok], digits)
         if any(r.get("noise_scale") is not None for r in ok):
             s["noise scale"] = _fmt([r.get("noise_scale") for r in ok], 2)

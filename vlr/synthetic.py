@@ -106,6 +106,9 @@ class Truth:
     rotation: np.ndarray
     object_mass: float | None = None       # [kg]
     object_com: np.ndarray | None = None   # (3,) in O [m]
+    # The local curvature 1 / rho of the object's surface at the contacts [1/m] (0: flat);
+    # None where the world's shape does not say (a mesh).
+    surface_curvature: float | None = None
 
 
 def nominal_grasp(model: HandModel, obj: ObjectParams, config: SyntheticConfig) -> NominalGrasp:
@@ -295,4 +298,5 @@ class SyntheticWorld:
                      stiffness=st.stiffness[0].copy(), tendon=st.tendon[0].copy(),
                      position=st.pos[0].copy(), rotation=st.rot[0].copy(),
                      object_mass=float(self.motion.obj.mass),
-                     object_com=np.asarray(self.motion.obj.com, dtype=float).copy())
+                     object_com=np.asarray(self.motion.obj.com, dtype=float).copy(),
+                     surface_curvature=self.motion.obj.surface.curvature)

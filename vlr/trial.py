@@ -211,6 +211,10 @@ class TrialSettings:
         object_com: the object's centre of mass the filter believes, [x, y, z] in O [m];
             None: its spec's. The world keeps the spec's; with a "com:AXIS" unknown the
             believed coordinate is the centre of its prior (`vlr.filter.COM_PRIOR_HALF_WIDTH`).
+        object_curvature: the local curvature of the object's surface at the contacts the
+            filter believes [1/m] (0: flat; `vlr.surface.LocalSurface.with_curvature`);
+            None: its spec's shape's. The world keeps the spec's; with a "curvature" unknown
+            it sets the top of the prior (`vlr.filter.CURVATURE_PRIOR_TOP`).
         anneal_stages: the filter's most weighting stages per observation
             (`vlr.filter.FilterConfig.anneal_stages`); 1: a tempered likelihood's rest is
             dropped.
@@ -258,6 +262,7 @@ class TrialSettings:
     noise_prior: tuple[float, float] | None = None
     object_mass: float | None = None
     object_com: tuple[float, float, float] | None = None
+    object_curvature: float | None = None
     config: str | None = None
 
     def __post_init__(self) -> None:
@@ -333,6 +338,10 @@ class TrialSettings:
         if self.object_mass is not None and not (
                 math.isfinite(self.object_mass) and self.object_mass > 0):
             raise UserError(f"object_mass {self.object_mass} kg must be finite and > 0")
+        if self.object_curvature is not None and not (
+                math.isfinite(self.object_curvature) and self.object_curvature >= 0):
+            raise UserError(f"object_curvature {self.object_curvature} 1/m must be finite and "
+                            ">= 0 (0: flat)")
         if self.limit_stiffness is not None and not (
                 math.isfinite(self.limit_stiffness) and self.limit_stiffness > 0):
             raise UserError(f"limit_stiffness {self.limit_stiffness} N m/rad must be > 0")
@@ -381,7 +390,7 @@ class TrialSettings:
                      "slide_friction", "spin_friction", "active_model_error",
                      "active_min_force_n",
                      "contact_stiffness", "limit_stiffness", "ramp_time", "cone_return",
-                     "object_mass"):
+                     "object_mass", "object_curvature"):
             v = getattr(self, name)
             if not (is_real(v) or (v is None and name in ("sigma_pos_mm", "sigma_rot_deg",
                                                           "sigma_turn_deg",
@@ -392,7 +401,8 @@ class TrialSettings:
                                                           "limit_stiffness",
                                                           "ramp_time",
                                                           "cone_return",
-                                                          "object_mass"))):
+                                                          "object_mass",
+                                                          "object_curvature"))):
                 raise bad(name, "a number")
         if self.noise_prior is not None:
             if (not isinstance(self.noise_prior, list | tuple) or len(self.noise_prior) != 2
@@ -520,7 +530,7 @@ class TrialSettings:
 
     def believed_object(self, spec):
         """The object the filter believes (`vlr.motion.ObjectParams`): the spec's, with
-        `object_mass` and `object_com` in place of its own where given."""
+        `object_mass`, `object_com` and `object_curvature` in place of its own where given."""
         from vlr.motion import ObjectParams
 
         obj = ObjectParams.from_spec(spec)
@@ -528,6 +538,8 @@ class TrialSettings:
             obj = replace(obj, mass=float(self.object_mass))
         if self.object_com is not None:
             obj = replace(obj, com=tuple(self.object_com))
+        if self.object_curvature is not None:
+            obj = replace(obj, surface=obj.surface.with_curvature(float(self.object_curvature)))
         return obj
 
     @property

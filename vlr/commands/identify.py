@@ -114,6 +114,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--object-com", type=float, nargs=3, default=None, metavar=("X", "Y", "Z"),
                    help="the object's centre of mass the filter believes, in its frame O [m] "
                    "(default: its spec's; the sim keeps the spec's)")
+    p.add_argument("--object-curvature", type=float, default=None, metavar="K",
+                   help="the local curvature 1/rho of the object's surface the filter believes "
+                   "[1/m] (0: flat; default: its spec's shape's; the sim keeps the spec's): a "
+                   "wrong guess, or with --unknown curvature the top of its prior")
     p.add_argument("--contact-stiffness", type=float, default=None, metavar="K_C",
                    help="the motion model's contact penalty [N/m] (default 1e6)")
     p.add_argument("--limit-stiffness", type=float, default=None, metavar="K_LIM",
@@ -220,6 +224,7 @@ def run(args: argparse.Namespace) -> int:
         anneal_stages=args.anneal_stages,
         contact_stiffness=args.contact_stiffness, limit_stiffness=args.limit_stiffness,
         object_mass=args.object_mass, object_com=args.object_com,
+        object_curvature=args.object_curvature,
         ramp_time=args.ramp_time, cone_return=args.cone_return,
         link_scaling=args.link_scaling, jitter_h=args.jitter_h, noise_prior=args.noise_prior,
         action_range_mm=args.action_range_mm, action_band_mm=args.action_band_mm)
