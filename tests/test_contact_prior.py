@@ -54,6 +54,24 @@ def test_a_cylinder_s_normals_cross_its_axis_and_meet_on_it():
         assert np.linalg.norm(along - (along @ n_p[i]) * n_p[i]) < 1e-9
 
 
+def test_each_particles_own_curvature_places_its_contacts():
+    """With a curvature unknown (`ParticleState.surface_curvature`) each particle's contacts
+    follow its own radius: a believed plane's particle with a curvature touches a ball of
+    that radius, one as flat as a plane the faces; a cylinder keeps its axis."""
+    theta = np.repeat(THETA, 2, axis=0)
+    seg = np.repeat(SEGMENTS, 2, axis=0)
+    rho = np.array([[0.04] * 3, [10.0] * 3])
+    mixed = surface_contact_normals(MODEL, LocalSurface("plane"), theta, seg, ROT, rho)
+    ball = surface_contact_normals(MODEL, LocalSurface("sphere", 0.04), THETA, SEGMENTS, ROT)
+    box = surface_contact_normals(MODEL, LocalSurface("plane"), THETA, SEGMENTS, ROT)
+    np.testing.assert_allclose(mixed[0], ball[0], atol=1e-12)
+    np.testing.assert_array_equal(mixed[1], box[0])
+    cyl = LocalSurface("cylinder", 0.016, (1.0, 0.0, 0.0))
+    own = surface_contact_normals(MODEL, cyl, THETA, SEGMENTS, ROT, np.full((1, 3), 0.016))
+    np.testing.assert_allclose(own, surface_contact_normals(MODEL, cyl, THETA, SEGMENTS, ROT),
+                               atol=1e-12)
+
+
 def test_a_box_s_pads_lie_on_the_faces_they_look_at():
     n_d = surface_contact_normals(MODEL, LocalSurface("plane"), THETA, SEGMENTS, ROT)
     n_p = _palm(n_d)[0]

@@ -315,7 +315,8 @@ class FilterConfig:
             contacts (the pad's inner face unless the guess says otherwise); "surface",
             where each particle's own pads would touch an object of the local surface's
             shape (`vlr.surface.surface_contact_normals`: a sphere's or a cylinder's radius,
-            a box's faces, oriented by the observed POM), for three fingers; else "pad".
+            a box's faces, oriented by the observed POM; with a curvature unknown, each
+            particle's own), for three fingers; else "pad".
         unknowns: unknown-parameter specs (`parse_unknown`).
         priors: optional uniform prior (low, high) per unknown spec.
         ess_fraction: tempering keeps ESS >= this fraction of P after weighting.
@@ -535,9 +536,10 @@ class ParticleFilter:
             _set_unknown(state, u, rng.uniform(u.prior[0], u.prior[1], p))
         centre = np.asarray(nominal_contact, dtype=float)[None]
         if cfg.contact_prior == "surface":
-            # After the unknowns: a link's length moves its pad.
+            # After the unknowns: a link's length moves its pad, a curvature its surface.
             normals = surface_contact_normals(m, self.motion.obj.surface, state.theta,
-                                              state.segments, state.rot)
+                                              state.segments, state.rot,
+                                              self.motion.contact_rho(state))
             if normals is not None:
                 centre = np.stack(angles_from_normals(normals), axis=-1)
         ab = centre + spread

@@ -233,7 +233,8 @@ def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
 
 
 def surface_contact_normals(model: HandModel, surface: LocalSurface, theta: np.ndarray,
-                            segments: np.ndarray, rot: np.ndarray) -> np.ndarray | None:
+                            segments: np.ndarray, rot: np.ndarray,
+                            rho: np.ndarray | None = None) -> np.ndarray | None:
     """(P, N, 3) pad normals in D where each particle's pads would touch one object of the
     local surface's shape, or None where that shape does not fix them (not three fingers).
 
@@ -252,6 +253,10 @@ def surface_contact_normals(model: HandModel, surface: LocalSurface, theta: np.n
     Args:
         theta: (P, N, K) joint angles [rad]; segments: (P, N, K) (`vlr.kinematics`).
         rot: (P, 3, 3) or (3, 3) the observed POM rotation R_PO.
+        rho: (P, N) each particle's own radius of curvature at each contact [m] (an unknown
+            curvature, `contact_radii`), None: the surface's. A particle of a believed
+            plane whose contacts are curved touches a sphere of its radius, and one whose
+            contacts are all flat the faces.
     """
     theta = np.asarray(theta, dtype=float)
     p, n = theta.shape[:2]
@@ -261,38 +266,60 @@ def surface_contact_normals(model: HandModel, surface: LocalSurface, theta: np.n
     rd = _distal_rotations(model, theta)                           # (P, N, 3, 3) R_PD
     c = contact_points(model, theta, np.zeros(theta.shape[:2] + (3,)), segments)
     inner = rd[..., 1]                                             # each pad's +y_D in P
-    if surface.kind == "plane":
-        faces = np.concatenate([rot, -rot], axis=-1)               # (P, 3, 6) outward normals
-        facing = np.einsum("pna,pak->pnk", inner, faces)
-        best = np.argmin(facing, axis=-1)                          # the face a pad looks at
-        n_palm = -np.take_along_axis(faces.transpose(0, 2, 1)[:, None], best[..., None, None],
-                                     axis=2)[:, :, 0]
-    else:
-        rho = surface.radius + model.pad_radius[None, :]           # (1, N)
-        if surface.kind == "cylinder":
-            axis = np.einsum("pab,b->pa", rot, np.asarray(surface.axis, dtype=float))
-            c = c - np.einsum("pna,pa->pn", c, axis)[..., None] * axis[:, None]
-        # |o - c_i|^2 = rho_i^2, less the first: 2 (c_i - c_0) . o = b_i (two planes).
-        a_mat = 2.0 * (c[:, 1:] - c[:, :1])                         # (P, 2, 3)
-        b = (np.sum(c[:, 1:] ** 2, -1) - np.sum(c[:, :1] ** 2, -1)
-             - rho[:, 1:] ** 2 + rho[:, :1] ** 2)                   # (P, 2)
-        # Their least-norm solution o0 plus a line along m, the normal of the pad centres'
-        # plane (of the cross-axis plane for a cylinder, where o lies in it).
-        o0 = np.einsum("pij,pj->pi", np.linalg.pinv(a_mat), b)
-        m = np.cross(a_mat[:, 0], a_mat[:, 1])
-        m /= np.maximum(np.linalg.norm(m, axis=-1, keepdims=True), 1e-12)
-        if surface.kind == "sphere":
-            # |o0 + t m - c_0|^2 = rho_0^2; the root on the side the inner faces look to.
-            d0 = o0 - c[:, 0]
-            half_b = np.sum(d0 * m, -1)
-            disc = half_b ** 2 - (np.sum(d0 * d0, -1) - rho[:, 0] ** 2)
-            side = np.sign(np.einsum("pna,pa->p", inner, m))
-            side = np.where(side == 0, 1.0, side)
-            t = -half_b + side * np.sqrt(np.maximum(disc, 0.0))
-            o = o0 + t[:, None] * m
+    if rho is None:
+        if surface.kind == "plane":
+            n_palm = _face_normals(rot, inner)
         else:
-            o = o0 - np.einsum("pa,pa->p", o0, axis)[:, None] * axis   # in the cross plane
-        d = o[:, None, :] - c
-        n_palm = d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
+            n_palm = _curved_normals(surface, c, surface.radius + model.pad_radius[None, :],
+                                     rot, inner)
+    else:
+        reach = np.asarray(rho, dtype=float) + model.pad_radius[None, :]
+        bent = surface if surface.kind != "plane" else LocalSurface("sphere", 1.0)
+        n_palm = _curved_normals(bent, c, reach, rot, inner)
+        if surface.kind == "plane":
+            flat = np.all(np.asarray(rho) >= 1.0 / FLAT_CURVATURE, axis=-1)
+            n_palm = np.where(flat[:, None, None], _face_normals(rot, inner), n_palm)
     n_d = np.einsum("pnba,pnb->pna", rd, n_palm)
     return n_d / np.linalg.norm(n_d, axis=-1, keepdims=True)
+
+
+def _face_normals(rot: np.ndarray, inner: np.ndarray) -> np.ndarray:
+    """(P, N, 3) in P: minus the outward normal of the box face each pad looks at
+    (`surface_contact_normals`)."""
+    faces = np.concatenate([rot, -rot], axis=-1)                   # (P, 3, 6) outward normals
+    facing = np.einsum("pna,pak->pnk", inner, faces)
+    best = np.argmin(facing, axis=-1)                              # the face a pad looks at
+    return -np.take_along_axis(faces.transpose(0, 2, 1)[:, None], best[..., None, None],
+                               axis=2)[:, :, 0]
+
+
+def _curved_normals(surface: LocalSurface, c: np.ndarray, rho: np.ndarray, rot: np.ndarray,
+                    inner: np.ndarray) -> np.ndarray:
+    """(P, N, 3) in P: from each pad centre c_i towards the centre (or axis) of the sphere
+    (or cylinder) that the three pads touch, rho (1 or P, N) = the radius + the pad's
+    (`surface_contact_normals`)."""
+    if surface.kind == "cylinder":
+        axis = np.einsum("pab,b->pa", rot, np.asarray(surface.axis, dtype=float))
+        c = c - np.einsum("pna,pa->pn", c, axis)[..., None] * axis[:, None]
+    # |o - c_i|^2 = rho_i^2, less the first: 2 (c_i - c_0) . o = b_i (two planes).
+    a_mat = 2.0 * (c[:, 1:] - c[:, :1])                            # (P, 2, 3)
+    b = (np.sum(c[:, 1:] ** 2, -1) - np.sum(c[:, :1] ** 2, -1)
+         - rho[:, 1:] ** 2 + rho[:, :1] ** 2)                       # (P, 2)
+    # Their least-norm solution o0 plus a line along m, the normal of the pad centres'
+    # plane (of the cross-axis plane for a cylinder, where o lies in it).
+    o0 = np.einsum("pij,pj->pi", np.linalg.pinv(a_mat), b)
+    m = np.cross(a_mat[:, 0], a_mat[:, 1])
+    m /= np.maximum(np.linalg.norm(m, axis=-1, keepdims=True), 1e-12)
+    if surface.kind == "cylinder":
+        o = o0 - np.einsum("pa,pa->p", o0, axis)[:, None] * axis   # in the cross plane
+    else:
+        # |o0 + t m - c_0|^2 = rho_0^2; the root on the side the inner faces look to.
+        d0 = o0 - c[:, 0]
+        half_b = np.sum(d0 * m, -1)
+        disc = half_b ** 2 - (np.sum(d0 * d0, -1) - rho[:, 0] ** 2)
+        side = np.sign(np.einsum("pna,pa->p", inner, m))
+        side = np.where(side == 0, 1.0, side)
+        t = -half_b + side * np.sqrt(np.maximum(disc, 0.0))
+        o = o0 + t[:, None] * m
+    d = o[:, None, :] - c
+    return d / np.maximum(np.linalg.norm(d, axis=-1, keepdims=True), 1e-12)
