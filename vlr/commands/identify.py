@@ -29,7 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--unknown", action="append", default=[],
                    help="extra unknown, e.g. stiffness:thumb.distal, length:left.proximal, "
-                   "the object's mass or a coordinate of its centre of mass (com:z); "
+                   "the object's mass, a coordinate of its centre of mass (com:z) or its "
+                   "surface's curvature at the contacts (curvature, curvature:thumb); "
                    "'noise' identifies the size of the model's error (a factor on the "
                    "likelihood's pose scales, vlr.observation)")
     p.add_argument("--max-iterations", type=int, default=40)
