@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from vlr.cli import main
 
@@ -127,6 +128,17 @@ def test_identify_scores_the_curvature_and_a_believed_one_moves_its_prior(tmp_pa
                                abs(hist["mean"][-1, -1]), rtol=1e-6)
     assert result["settings"]["object_curvature"] == 40.0
     _refused(tmp_path, "--object-curvature", "-1")
+
+
+def test_a_prior_of_ones_own_bounds_an_unknown(tmp_path):
+    result, hist = _gelatin_box(tmp_path / "p", "--particles", "1000", "--max-iterations", "1",
+                                "--unknown", "mass", "--prior", "mass=0.05,0.15")
+    assert 0.05 <= hist["low"][0, -1] and hist["high"][0, -1] <= 0.15
+    assert result["settings"]["priors"] == {"mass": [0.05, 0.15]}
+    for bad in ("mass=0.2,0.1", "mass=0,1", "com:x=0,1"):
+        _refused(tmp_path, "--unknown", "mass", "--prior", bad)
+    with pytest.raises(SystemExit):   # argparse's own refusal, exit code 2
+        _refused(tmp_path, "--unknown", "mass", "--prior", "mass=a")
 
 
 def test_identify_sim_runs_from_rendered_frames(tmp_path):

@@ -116,7 +116,7 @@ def parse_unknown(spec: str, model: HandModel,
         finger = model.finger_index(rest) if rest else -1
         nominal = model.tendon_stiffness
         lo, hi = prior or (0.5 * nominal, 2.0 * nominal)
-        return Unknown(spec, kind, finger, -1, (float(lo), float(hi)))
+        return Unknown(spec, kind, finger, -1, _positive_prior(spec, lo, hi))
     if kind not in ("stiffness", "length") or "." not in rest:
         raise ValueError(f"unknown parameter spec {spec!r}; use stiffness:FINGER.JOINT, "
                          "length:FINGER.JOINT, tendon, tendon:FINGER, noise, mass, com:x|y|z, "
@@ -129,7 +129,15 @@ def parse_unknown(spec: str, model: HandModel,
     else:
         nominal = model.segments[i, k]
         lo, hi = prior or (0.5 * nominal, 1.3 * nominal)
-    return Unknown(spec, kind, i, k, (float(lo), float(hi)))
+    return Unknown(spec, kind, i, k, _positive_prior(spec, lo, hi))
+
+
+def _positive_prior(spec: str, lo: float, hi: float) -> tuple[float, float]:
+    """A spring rate's or a length's prior: 0 < low <= high, both finite."""
+    if not 0 < lo <= hi < math.inf:
+        raise ValueError(f"{spec} prior ({lo}, {hi}) must satisfy 0 < low <= high, both "
+                         "finite")
+    return float(lo), float(hi)
 
 
 def _parse_object_unknown(spec: str, kind: str, rest: str, prior: tuple[float, float] | None,

@@ -200,6 +200,9 @@ class TrialSettings:
             slide_friction or spin_friction (the friction in the energy already slides).
         jitter_h: the filter's Liu-West bandwidth (`vlr.filter.FilterConfig.jitter_h`);
             None: its default.
+        priors: {unknown spec: [low, high]} the uniform prior of an unknown in its SI unit
+            (e.g. {"stiffness:thumb.distal": [0.01, 0.08]} N m/rad); an unknown not named
+            keeps its default (`vlr.filter.parse_unknown`). Each must be among `unknowns`.
         noise_prior: [low, high] of the "noise" unknown's uniform prior (a factor on the
             likelihood's pose scales); None: `vlr.filter.NOISE_PRIOR`. Needs "noise" among
             the unknowns.
@@ -260,6 +263,7 @@ class TrialSettings:
     link_scaling: bool = False
     jitter_h: float | None = None
     noise_prior: tuple[float, float] | None = None
+    priors: dict[str, tuple[float, float]] = field(default_factory=dict)
     object_mass: float | None = None
     object_com: tuple[float, float, float] | None = None
     object_curvature: float | None = None
@@ -412,6 +416,20 @@ class TrialSettings:
             if "noise" not in self.unknowns:
                 raise bad("noise_prior", "a prior of the 'noise' unknown: add it to unknowns")
             object.__setattr__(self, "noise_prior", tuple(float(v) for v in self.noise_prior))
+        if not isinstance(self.priors, dict):
+            raise bad("priors", "a mapping like {stiffness:thumb.distal: [0.01, 0.08]}")
+        for spec, prior in self.priors.items():
+            if spec not in self.unknowns:
+                raise UserError(f"priors: {spec!r} is not among the unknowns {list(self.unknowns)}")
+            if (not isinstance(prior, list | tuple) or len(prior) != 2
+                    or not all(is_real(v) and math.isfinite(v) for v in prior)
+                    or not prior[0] <= prior[1]):
+                raise UserError(f"priors: {spec!r} {prior!r} must be [low, high] with low <= "
+                                "high, both finite")
+        if "noise" in self.priors and self.noise_prior is not None:
+            raise bad("noise_prior", "given once: it is also in priors")
+        object.__setattr__(self, "priors", {k: (float(a), float(b))
+                                            for k, (a, b) in self.priors.items()})
         if self.object_com is not None:
             if (not isinstance(self.object_com, list | tuple) or len(self.object_com) != 3
                     or not all(is_real(v) and math.isfinite(v) for v in self.object_com)):
@@ -485,6 +503,7 @@ class TrialSettings:
             d["action_range_mm"] = list(self.action_range_mm)
         if self.noise_prior is not None:
             d["noise_prior"] = list(self.noise_prior)
+        d["priors"] = {k: list(v) for k, v in self.priors.items()}
         if self.object_com is not None:
             d["object_com"] = list(self.object_com)
         return d
@@ -710,7 +729,7 @@ def check_unknowns(settings: TrialSettings, model, obj=None) -> None:
     obj = obj or ObjectParams(mass=1.0, com=(0.0, 0.0, 0.0))  # the form only: no priors kept
     for u in settings.unknowns:
         try:
-            parse_unknown(u, model, obj=obj)
+            parse_unknown(u, model, settings.priors.get(u), obj=obj)
         except (ValueError, KeyError) as exc:
             raise UserError(f"unknown {u!r}: {exc}") from None
 
@@ -753,8 +772,9 @@ def identify_config(settings: TrialSettings, model):
     fcfg = FilterConfig(n_particles=settings.particles, seed=settings.seed,
                         motion=settings.motion_config(),
                         unknowns=settings.unknowns,
-                        priors=({} if settings.noise_prior is None
-                                else {"noise": settings.noise_prior}),
+                        priors={**settings.priors,
+                                **({} if settings.noise_prior is None
+                                   else {"noise": settings.noise_prior})},
                         theta_spread=float(np.radians(settings.grasp_guess[1])),
                         anneal_stages=settings.anneal_stages,
                         contact_prior=settings.contact_prior_in_effect,

@@ -131,6 +131,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="with rolling contacts: after each action return the contacts' "
                    "stretch onto the friction cone MU N and settle again (a cheap stand-in "
                    "for --slide-friction; default off; the sim's pads have 1.0)")
+    p.add_argument("--prior", action="append", default=[], type=_prior,
+                   metavar="SPEC=LOW,HIGH", help="the uniform prior of an --unknown in its SI "
+                   "unit, e.g. stiffness:thumb.distal=0.01,0.08 [N m/rad] (repeatable; "
+                   "default per kind: vlr.filter.parse_unknown)")
     p.add_argument("--noise-prior", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
                    help="with --unknown noise: the uniform prior of the factor on the "
                    "likelihood's pose scales (default 0.25 1)")
@@ -165,6 +169,18 @@ def _assignment(text: str) -> tuple[str, float]:
     except ValueError:
         raise argparse.ArgumentTypeError(
             f"{text!r}: use FINGER.JOINT=VALUE, e.g. thumb.distal=0.045") from None
+
+
+def _prior(text: str) -> tuple[str, tuple[float, float]]:
+    spec, sep, bounds = text.partition("=")
+    try:
+        low, high = (float(v) for v in bounds.split(","))
+        if not sep or not spec.strip():
+            raise ValueError
+        return spec.strip(), (low, high)
+    except ValueError:
+        raise argparse.ArgumentTypeError(
+            f"{text!r}: use SPEC=LOW,HIGH, e.g. stiffness:thumb.distal=0.01,0.08") from None
 
 
 def _iterations(text: str) -> list[int]:
@@ -228,6 +244,7 @@ def run(args: argparse.Namespace) -> int:
         object_curvature=args.object_curvature,
         ramp_time=args.ramp_time, cone_return=args.cone_return,
         link_scaling=args.link_scaling, jitter_h=args.jitter_h, noise_prior=args.noise_prior,
+        priors=dict(args.prior),
         action_range_mm=args.action_range_mm, action_band_mm=args.action_band_mm)
     bar = None
 
