@@ -125,6 +125,15 @@ def test_parse_the_curvature(modelo):
             parse_unknown(spec, modelo, prior, OBJ)
 
 
+@pytest.mark.parametrize("specs, message", [
+    (("mass", "mass"), "'mass' is given twice"),
+    (("curvature", "curvature:thumb"), "the same parameter"),
+    (("tendon:left", "tendon"), "the same parameter")])
+def test_one_parameter_sampled_twice_is_refused(modelo, specs, message):
+    with pytest.raises(ValueError, match=message):
+        ParticleFilter(modelo, OBJ, FilterConfig(n_particles=10, unknowns=specs))
+
+
 def test_a_fingers_curvature_is_sampled_at_its_contact_alone(modelo):
     pf = _run(modelo, 3, unknowns=("curvature:thumb",))
     k = pf.state.surface_curvature

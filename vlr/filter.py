@@ -166,6 +166,23 @@ def _parse_object_unknown(spec: str, kind: str, rest: str, prior: tuple[float, f
     return Unknown(spec, kind, -1, axis, (float(lo), float(hi)))
 
 
+def check_unknown_set(specs: tuple[str, ...] | list[str]) -> None:
+    """Refuse a set of unknowns that samples one parameter twice: a spec given twice, or one
+    for every finger ("tendon", "curvature") beside one finger's ("tendon:thumb")."""
+    seen = set()
+    for spec in specs:
+        if spec in seen:
+            raise ValueError(f"unknown {spec!r} is given twice")
+        seen.add(spec)
+    for spec in specs:
+        kind, _, rest = spec.partition(":")
+        if kind in ("tendon", "curvature") and not rest:
+            mine = [s for s in specs if s.startswith(kind + ":")]
+            if mine:
+                raise ValueError(f"unknown {spec!r} (every finger's) and {mine[0]!r} sample "
+                                 "the same parameter: give one or the other")
+
+
 def _parse_curvature(spec: str, rest: str, model: HandModel,
                      prior: tuple[float, float] | None, obj: ObjectParams | None) -> Unknown:
     """The object's local "curvature" at every contact or at one finger's (`parse_unknown`)."""
@@ -441,6 +458,7 @@ class ParticleFilter:
         self.config = config or FilterConfig()
         self.motion = MotionModel(model, obj, self.config.motion)
         self.obs_model = self.config.observation
+        check_unknown_set(self.config.unknowns)
         self.unknowns = tuple(parse_unknown(s, model, self.config.priors.get(s), obj)
                               for s in self.config.unknowns)
         self.rng = np.random.default_rng(self.config.seed)

@@ -723,9 +723,13 @@ def open_world(settings: TrialSettings) -> World:
 def check_unknowns(settings: TrialSettings, model, obj=None) -> None:
     """Bad unknown specs become one UserError naming the spec. Without `obj` (the object
     believed) the object's unknowns ("mass", "com:z") are checked for their form only."""
-    from vlr.filter import parse_unknown
+    from vlr.filter import check_unknown_set, parse_unknown
     from vlr.motion import ObjectParams
 
+    try:
+        check_unknown_set(settings.unknowns)
+    except ValueError as exc:
+        raise UserError(str(exc)) from None
     obj = obj or ObjectParams(mass=1.0, com=(0.0, 0.0, 0.0))  # the form only: no priors kept
     for u in settings.unknowns:
         try:
