@@ -176,6 +176,10 @@ def crb_report(s: CrbSettings) -> dict:
             raise UserError(f"the replayed trial's grasp commands {np.round(s.replay[0], 6)} "
                             f"differ from the sim's {np.round(u, 6)}: not the same trial")
         truth = world.truth()
+        if (any(u.kind == "curvature" for u in pf.unknowns)
+                and getattr(truth, "surface_curvature", None) is None):
+            raise UserError(f"unknown 'curvature': object {ts.object!r} is a mesh, whose "
+                            "curvature the sim does not know; the bound needs its true value")
         trace = InformationTrace(pf, truth_vector(pf, truth), truth.position, truth.rotation,
                                  u, s.relative_step)
         rng = np.random.default_rng(ts.seed + 1)  # vlr identify's action stream
