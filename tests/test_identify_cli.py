@@ -98,6 +98,10 @@ def test_identify_scores_the_objects_unknowns(tmp_path):
                                1e3 * abs(hist["mean"][-1, -2] - 0.097), rtol=1e-6)
     np.testing.assert_allclose(result["errors"]["object_com_mm"]["z"],
                                1e3 * abs(hist["mean"][-1, -1] - 0.016), rtol=1e-6)
+    # the signed path of each estimate, its last the final median
+    path = result["unknown_median_by_iteration"]["mass"]
+    assert len(path) == 3 and path[-1] == pytest.approx(
+        result["unknown_estimates"]["mass"]["median"], rel=1e-4)
     _refused(tmp_path, "--unknown", "com:w")
 
 

@@ -41,6 +41,16 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
     # actions a trial took (active exploration's are not a seed's random stream).
     out["commands_mm_by_iteration"] = [[round(float(x) * 1e3, 9) for x in r.command]
                                        for r in result.history]
+    # Each unknown's posterior median per iteration (SI units), with or without a truth: the
+    # errors below lose their sign, and whether an estimate comes down from above or up from
+    # below is what tells a prior's pull from the model's (RESULTS.md 5, session 33).
+    specs = list(result.unknowns)
+    if specs and result.history:
+        tail = len(specs)
+        out["unknown_median_by_iteration"] = {
+            spec: [float(f"{(r.posterior or r.prior).median[j - tail]:.5g}")
+                   for r in result.history]
+            for j, spec in enumerate(specs)}
     if result.scores:
         out["proximal_deg_by_iteration"] = [
             round(float(sc.theta_error_deg.reshape(n, k)[:, 0].mean()), 4)
