@@ -233,6 +233,7 @@ def test_the_row_gives_the_objects_unknowns_in_grams_and_millimetres():
     assert (row["mass_g.median"], row["mass_g.low"], row["mass_g.high"]) == pytest.approx(
         (58.0, 23.0, 96.0))
     assert row["com_z_mm.median"] == pytest.approx(41.0)
+    assert row["spring_thumb.distal.median"] == pytest.approx(0.04)
     assert not any(k.startswith("stiffness:") for k in row)
     s = summarize_rows([row])[0]
     assert s["object_mass_g error [g]"] == "12.50"

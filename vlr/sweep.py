@@ -310,16 +310,19 @@ def _object_unknowns(row: dict[str, Any], errors: dict[str, Any], suffix: str) -
         row[f"curvature_per_m{suffix}.{where}"] = v
 
 
-def _object_estimates(row: dict[str, Any], estimates: dict[str, Any]) -> None:
-    """The object's unknowns' estimates themselves (posterior median and 95% interval), in
-    grams, millimetres and 1/m: `mass_g.median`, `com_x_mm.low`, `curvature_all.high`, ...
-    The errors above lose their sign and whether the interval held the truth."""
+def _unknown_estimates(row: dict[str, Any], estimates: dict[str, Any]) -> None:
+    """The unknowns' estimates themselves (posterior median and 95% interval), in grams,
+    millimetres, 1/m and N m/rad: `mass_g.median`, `com_x_mm.low`, `curvature_all.high`,
+    `length_left.proximal_mm.median`, `spring_thumb.distal.median`, ... The errors above lose
+    their sign and whether the interval held the truth."""
     for spec, e in estimates.items():
         kind, _, where = spec.partition(":")
-        if kind not in ("mass", "com", "curvature") or not isinstance(e, dict):
+        names = {"mass": ("mass_g", 1e3), "com": (f"com_{where}_mm", 1e3),
+                 "curvature": (f"curvature_{where or 'all'}", 1.0),
+                 "length": (f"length_{where}_mm", 1e3), "stiffness": (f"spring_{where}", 1.0)}
+        if kind not in names or not isinstance(e, dict):
             continue
-        name, scale = {"mass": ("mass_g", 1e3), "com": (f"com_{where}_mm", 1e3),
-                       "curvature": (f"curvature_{where or 'all'}", 1.0)}[kind]
+        name, scale = names[kind]
         for stat in ("median", "low", "high"):
             if e.get(stat) is not None:
                 row[f"{name}.{stat}"] = e[stat] * scale
@@ -358,7 +361,7 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
     for joint, v in (errors.get("stiffness") or {}).items():
         row[f"stiffness.{joint}"] = v
     _object_unknowns(row, errors, "")
-    _object_estimates(row, _get(rec, ("result", "unknown_estimates")) or {})
+    _unknown_estimates(row, _get(rec, ("result", "unknown_estimates")) or {})
     # The same figures of the posterior median (vlr.filter.Summary), where recorded.
     median = _get(rec, ("result", "errors_median")) or {}
     if median:
