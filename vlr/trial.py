@@ -217,7 +217,8 @@ class TrialSettings:
         object_curvature: the local curvature of the object's surface at the contacts the
             filter believes [1/m] (0: flat; `vlr.surface.LocalSurface.with_curvature`);
             None: its spec's shape's. The world keeps the spec's; with a "curvature" unknown
-            it sets the top of the prior (`vlr.filter.CURVATURE_PRIOR_TOP`).
+            the prior runs from 0 to the larger of twice it and
+            `vlr.filter.CURVATURE_PRIOR_TOP`.
         anneal_stages: the filter's most weighting stages per observation
             (`vlr.filter.FilterConfig.anneal_stages`); 1: a tempered likelihood's rest is
             dropped.

@@ -118,7 +118,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--object-curvature", type=float, default=None, metavar="K",
                    help="the local curvature 1/rho of the object's surface the filter believes "
                    "[1/m] (0: flat; default: its spec's shape's; the sim keeps the spec's): a "
-                   "wrong guess, or with --unknown curvature the top of its prior")
+                   "wrong guess; with --unknown curvature its prior is 0 to the larger of "
+                   "twice K and 50")
     p.add_argument("--contact-stiffness", type=float, default=None, metavar="K_C",
                    help="the motion model's contact penalty [N/m] (default 1e6)")
     p.add_argument("--limit-stiffness", type=float, default=None, metavar="K_LIM",
