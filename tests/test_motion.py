@@ -523,3 +523,22 @@ def test_the_surfaces_own_curvature_changes_nothing_and_another_rolls_otherwise(
         np.testing.assert_array_equal(getattr(st, name)[0], getattr(own, name)[0])
     assert np.abs(st.anchors[2] - st.anchors[0]).max() > 1e-6
     assert st.take(np.array([2])).surface_curvature.tolist() == [[50.0] * 3]
+
+
+def test_a_plane_bent_to_a_curvature_rolls_as_that_sphere(modelo):
+    """A believed plane whose particles carry a curvature (the curvature unknown) moves
+    exactly as the motion model of a sphere of that radius: the kernel's rolling term and
+    the contact update both take the particle's own radius."""
+    plane = MotionModel(modelo, ObjectParams(mass=OBJ.mass, com=OBJ.com), ROLL)
+    ball = MotionModel(modelo, ObjectParams(mass=OBJ.mass, com=OBJ.com,
+                                            surface=LocalSurface("sphere", 0.04)), ROLL)
+    _, st, u0 = grasp(modelo, n=2, config=ROLL)
+    assert np.all(ball.solve(st, u0)[0] == 0)
+    bent = st.copy()
+    bent.hold_surface(ObjectParams(mass=OBJ.mass, com=OBJ.com))
+    bent.surface_curvature[:] = 25.0
+    u = u0 + np.array([3e-4, -2e-4, 1e-4])
+    assert np.all(ball.solve(st, u, u_from=u0)[0] == 0)
+    assert np.all(plane.solve(bent, u, u_from=u0)[0] == 0)
+    for name in ("theta", "pos", "anchors", "normals"):
+        np.testing.assert_allclose(getattr(bent, name), getattr(st, name), atol=1e-12)
