@@ -141,6 +141,7 @@ def test_a_prior_of_ones_own_bounds_an_unknown(tmp_path):
     assert result["settings"]["priors"] == {"mass": [0.05, 0.15]}
     for bad in ("mass=0.2,0.1", "mass=0,1", "com:x=0,1"):
         _refused(tmp_path, "--unknown", "mass", "--prior", bad)
+    _refused(tmp_path, "--unknown", "mass", "--prior", "mass=0.05,0.1", "--prior", "mass=0.1,0.2")
     with pytest.raises(SystemExit):   # argparse's own refusal, exit code 2
         _refused(tmp_path, "--unknown", "mass", "--prior", "mass=a")
 

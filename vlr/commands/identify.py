@@ -217,10 +217,14 @@ def _finish_view(view, args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from vlr.errors import UserError
     from vlr.plots import CloudRecorder, particle_cloud
     from vlr.results import write_outputs
     from vlr.trial import TrialSettings, identify_trial
 
+    specs = [spec for spec, _ in args.prior]
+    if twice := sorted({spec for spec in specs if specs.count(spec) > 1}):
+        raise UserError(f"--prior {twice[0]} is given twice: give each unknown's prior once")
     out = Path(args.out)
     settings = TrialSettings(
         backend=args.backend, object=args.object, hand=args.hand, true_hand=args.true_hand,
