@@ -41,6 +41,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from sim.gap_fit import profile_unknown
 from sim.pads import SLIDE_FRICTION, TORSION_FRICTION
 from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
@@ -97,6 +98,12 @@ class GapSettings:
             (`sim.backend.SimOptions.ramp_time`). 0.05, the setting of every committed gap
             report; `vlr identify`'s sim trials move over 0.1 s (`vlr.trial.RAMP_TIME_DEFAULT`,
             the hardware backend's default move).
+        fit: an unknown ("stiffness:thumb.distal", as `vlr identify --unknown`) whose value
+            the model wants is profiled on every rung (`sim.gap_fit`); None: no profile.
+        fit_range: the profile's (low, high) [SI units]; None: the unknown's default prior.
+        fit_points: the profile's values.
+        fit_sigma: the profile cost's units, position [mm] and orientation [deg]: the sim
+            trials' likelihood scales (`vlr.trial.ROLLING_TURN_SIGMA`).
     """
 
     object: str = "apple"
@@ -116,8 +123,18 @@ class GapSettings:
     limit_stiffness: float = MotionConfig.limit_stiffness
     start: str = "settle"
     ramp_time: float = 0.05
+    fit: str | None = None
+    fit_range: tuple[float, float] | None = None
+    fit_points: int = 25
+    fit_sigma: tuple[float, float] = (0.2, 0.4)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.fit_points, int) or self.fit_points < 2:
+            raise UserError(f"fit points {self.fit_points!r} must be an integer >= 2")
+        if self.fit_range is not None:
+            lo, hi = self.fit_range
+            if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
+                raise UserError(f"fit range ({lo}, {hi}) must be finite with low < high")
         if not (isinstance(self.ramp_time, (int, float)) and not isinstance(self.ramp_time, bool)
                 and math.isfinite(self.ramp_time) and 0 < self.ramp_time <= 2.0):
             raise UserError(f"ramp time {self.ramp_time!r} s must be in (0, 2]")
@@ -210,13 +227,20 @@ def _start(motion: MotionModel, settle: MotionConfig, model: HandModel, rec: Rec
     settled at u_k with glued contacts, or with each contact's stretch the sim's contact
     force, relaxed at u_k (the command change's first step with no change)."""
     st = _state(model, rec.truths[k])
+    _settle_at(motion, settle, model, rec, st, k, start)
+    return st
+
+
+def _settle_at(motion: MotionModel, settle: MotionConfig, model: HandModel, rec: Recording,
+               st: ParticleState, k: int, start: str) -> None:
+    """`_start` on states already at the true configuration before action k+1 (in place)."""
     if start == "sim-loads":
         # The penalty's stretch times k_c is the force on the pad: minus the pad's on the object.
-        st.anchor_to_pose(model, (-rec.forces[k] / motion.config.contact_stiffness)[None])
+        st.anchor_to_pose(model, np.broadcast_to(
+            -rec.forces[k] / motion.config.contact_stiffness, (st.n, *rec.forces[k].shape)))
         motion.solve(st, rec.commands[k], u_from=rec.commands[k])
     else:
         motion.solve(st, rec.commands[k], settle)
-    return st
 
 
 def _angle_deg(r: np.ndarray) -> float:
@@ -339,6 +363,14 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
 
     drift = _drift(motion, settle, model, rec, settings.drift_actions, settings.start)
     s = np.array(static) if static else np.full((1, 3), math.nan)
+    fit = {}
+    if settings.fit:
+        values = (None if settings.fit_range is None
+                  else np.linspace(*settings.fit_range, settings.fit_points))
+        fit = {"fit": profile_unknown(
+            rec, model, motion, settings.fit,
+            lambda st, k: _settle_at(motion, settle, model, rec, st, k, settings.start),
+            values, settings.fit_points, settings.fit_sigma)}
     return {
         "terms": list(terms),
         "actions": len(rows),
@@ -358,6 +390,7 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
                    "orientation_deg_mean": float(s[:, 1].mean()),
                    "joint_deg_mean": float(s[:, 2].mean())},
         "per_action": rows,
+        **fit,
     }
 
 
@@ -404,6 +437,8 @@ def gap_report(settings: GapSettings,
     """Record the actions once, then measure every rung of `ladder` on them. The top-level
     ratios are the full model's (the last rung)."""
     t0 = time.perf_counter()
+    if settings.fit:
+        check_fit(settings)
     rec = record_actions(settings)
     if len(rec.commands) < 2:
         raise UserError(f"{settings.object}: the grasp was lost at the first action; "
@@ -434,9 +469,26 @@ def gap_report(settings: GapSettings,
         "ratio_orientation_mean": full["ratio_orientation_mean"],
         "drift_ratio": full["drift_ratio"],
         "drift_ratio_orientation": full["drift_ratio_orientation"],
+        **({"fit": full["fit"]} if "fit" in full else {}),
         "configs": configs,
         "seconds": time.perf_counter() - t0,
     }
+
+
+def check_fit(settings: GapSettings) -> None:
+    """Refuse a `fit` the hand or the object cannot take, before the sim runs."""
+    from vlr.filter import parse_unknown
+    from vlr.spec import load_hand, load_object
+
+    model = HandModel.from_spec(load_hand(settings.hand))
+    try:
+        u = parse_unknown(settings.fit, model,
+                          obj=ObjectParams.from_spec(load_object(settings.object)))
+    except (KeyError, ValueError) as exc:
+        raise UserError(f"--fit {settings.fit!r}: {exc}") from None
+    if u.kind == "noise":
+        raise UserError(f"--fit {settings.fit!r}: the likelihood's noise factor does not "
+                        "move the model; nothing to fit")
 
 
 def format_report(rep: dict) -> str:
@@ -482,6 +534,19 @@ def format_report(rep: dict) -> str:
                      f"{t.get('tension_static_error_n', math.nan):10.3f}")
     lines.append("tensions: the model's error on each action's tension change (the sim's "
                  "change beside it) and at its settle on the true state, RMS over the fingers")
+    fits = [(c["name"], c["fit"]) for c in rep["configs"] if "fit" in c]
+    if fits:
+        f0 = fits[0][1]
+        lines.append(f"{'fit of ' + f0['unknown']:28s} {'restart':>10s} {'open loop':>10s} "
+                     f"{'truth':>10s}   ({len(f0['values'])} values "
+                     f"{f0['values'][0]:.4g}-{f0['values'][-1]:.4g})")
+        for name, f in fits:
+            lines.append(f"{name:28s} {f['best_restart']:10.4g} {f['best_open_loop']:10.4g} "
+                         f"{f['truth']:10.4g}"
+                         + (f"  ({f['failed']} values failed)" if f["failed"] else ""))
+        lines.append("fit: the value whose predicted motions cost least (squared errors over "
+                     f"{f0['sigma_pos_mm']:g} mm and {f0['sigma_rot_deg']:g} deg), each action "
+                     "from the true state (restart) or all in sequence (open loop)")
     return "\n".join(lines)
 
 
@@ -530,8 +595,24 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="how long the sim takes to make each command change [s] (default "
                    f"{GapSettings.ramp_time:g}, that of the committed reports; vlr identify's "
                    "sim trials move over 0.1 s, the hardware backend's default move)")
+    p.add_argument("--fit", metavar="UNKNOWN",
+                   help="profile the value of an unknown the model wants from the true "
+                   "states, on every rung (as --unknown: stiffness:thumb.distal, "
+                   "length:left.proximal, mass, ...)")
+    p.add_argument("--fit-range", metavar="LOW,HIGH", type=_pair,
+                   help="the profile's range [SI units] (default: the unknown's prior)")
+    p.add_argument("--fit-points", type=int, default=GapSettings.fit_points,
+                   help=f"the profile's values (default {GapSettings.fit_points})")
     p.add_argument("--json", help="write the report (per object, per model rung) as JSON")
     p.set_defaults(func=run)
+
+
+def _pair(text: str) -> tuple[float, float]:
+    try:
+        lo, hi = (float(v) for v in text.split(","))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"{text!r}: expected LOW,HIGH") from None
+    return lo, hi
 
 
 def run(args: argparse.Namespace) -> int:
@@ -557,7 +638,8 @@ def run(args: argparse.Namespace) -> int:
                                spin_memory=args.spin_memory,
                                exact_cylinder=args.exact_cylinder,
                                limit_stiffness=args.limit_stiffness, start=args.start,
-                               ramp_time=args.ramp_time)
+                               ramp_time=args.ramp_time, fit=args.fit,
+                               fit_range=args.fit_range, fit_points=args.fit_points)
         rep = gap_report(settings)
         print(format_report(rep) + "\n", flush=True)
         reports.append(rep)

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -31,6 +32,9 @@ from vlr.surface import surface_contact_normals
 __all__ = [
     "Unknown",
     "parse_unknown",
+    "unknown_values",
+    "set_unknown",
+    "hold_unknowns",
     "FilterConfig",
     "Summary",
     "IterationRecord",
@@ -197,7 +201,8 @@ def _parse_curvature(spec: str, rest: str, model: HandModel,
     return Unknown(spec, "curvature", finger, -1, (float(lo), float(hi)))
 
 
-def _get_unknown(state: ParticleState, u: Unknown) -> np.ndarray:
+def unknown_values(state: ParticleState, u: Unknown) -> np.ndarray:
+    """(P,) the particles' values of unknown `u` [SI units]."""
     if u.kind == "noise":
         return state.noise
     if u.kind == "mass":
@@ -213,7 +218,9 @@ def _get_unknown(state: ParticleState, u: Unknown) -> np.ndarray:
     return state.tendon[:, max(u.finger, 0)]
 
 
-def _set_unknown(state: ParticleState, u: Unknown, values: np.ndarray) -> None:
+def set_unknown(state: ParticleState, u: Unknown, values: np.ndarray) -> None:
+    """Write (P,) values of unknown `u` into `state` (in place; the object's unknowns need
+    the particles to hold their own object, `hold_unknowns`)."""
     if u.kind == "noise":
         state.noise[:] = values
     elif u.kind == "mass":
@@ -233,6 +240,16 @@ def _set_unknown(state: ParticleState, u: Unknown, values: np.ndarray) -> None:
         state.tendon[:, :] = values[:, None]
     else:
         state.tendon[:, u.finger] = values
+
+
+def hold_unknowns(state: ParticleState, unknowns: Sequence[Unknown],
+                  obj: ObjectParams) -> None:
+    """With the object's unknowns, each particle carries its own object (mass and centre of
+    mass, or surface curvature), starting from `obj`'s."""
+    if any(u.kind in ("mass", "com") for u in unknowns):
+        state.hold_object(obj)
+    if any(u.kind == "curvature" for u in unknowns):
+        state.hold_surface(obj)
 
 
 # --------------------------------------------------------------------------- pure helpers
@@ -495,7 +512,7 @@ class ParticleFilter:
         alpha, beta = angles_from_normals(state.normals)
         cols = [state.theta.reshape(state.n, -1), np.stack([alpha, beta], -1).reshape(
             state.n, -1)]
-        cols += [_get_unknown(state, u)[:, None] for u in self.unknowns]
+        cols += [unknown_values(state, u)[:, None] for u in self.unknowns]
         return np.concatenate(cols, axis=1)
 
     def unpack(self, x: np.ndarray, state: ParticleState) -> None:
@@ -507,15 +524,10 @@ class ParticleFilter:
         state.normals[...] = normals_from_angles(ab[..., 0], ab[..., 1])
         self._hold_object(state)
         for j, u in enumerate(self.unknowns):
-            _set_unknown(state, u, x[:, n_th + 2 * nf + j])
+            set_unknown(state, u, x[:, n_th + 2 * nf + j])
 
     def _hold_object(self, state: ParticleState) -> None:
-        """With the object's unknowns, each particle carries its own object (mass and centre
-        of mass, or surface curvature)."""
-        if any(u.kind in ("mass", "com") for u in self.unknowns):
-            state.hold_object(self.motion.obj)
-        if any(u.kind == "curvature" for u in self.unknowns):
-            state.hold_surface(self.motion.obj)
+        hold_unknowns(state, self.unknowns, self.motion.obj)
 
     # ---- Algorithm 1
 
@@ -559,7 +571,7 @@ class ParticleFilter:
         spread = rng.normal(0.0, cfg.contact_spread, (p, nf, 2))
         self._hold_object(state)
         for u in self.unknowns:
-            _set_unknown(state, u, rng.uniform(u.prior[0], u.prior[1], p))
+            set_unknown(state, u, rng.uniform(u.prior[0], u.prior[1], p))
         centre = np.asarray(nominal_contact, dtype=float)[None]
         if cfg.contact_prior == "surface":
             # After the unknowns: a link's length moves its pad, a curvature its surface.

@@ -1,0 +1,140 @@
+"""`vlr gap --fit UNKNOWN`: which value of an unknown does the motion model want, given the
+simulator's TRUE states? (issue 5, the spring's lean.)
+
+The filter identifies a parameter (a joint spring, a link length, the object's mass...) by
+the motion it predicts (Eq. 4, 9). If the model itself, started at the sim's true
+configuration, predicts the sim's motions best with another value than the truth, no
+estimator can find the truth: the model leans. If it predicts them best at the truth, a
+lean of the filter's estimate is the estimator's (its other unknowns, its prior, its
+posterior's shape), not the model's.
+
+The profile: each candidate value is one particle (vectorized), every particle at the true
+state with only that parameter changed (contacts re-anchored to the true pose). Its cost is
+the sum over actions of the squared motion errors in the likelihood's units (Eq. 12 without
+the turn: position over `sigma_pos`, orientation over `sigma_rot`):
+
+* per action ("restart"): each action predicted from the true state before it, as
+  `vlr gap`'s per-action ratio;
+* open loop: all actions predicted in sequence from the first true state, each particle
+  carrying its own state; each action's predicted motion against the true one (as the
+  filter's particles, which never see the truth again).
+
+A sim-only tool (it reads ground truth); the estimator never runs it.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+
+import numpy as np
+
+from vlr.errors import UserError
+from vlr.filter import hold_unknowns, parse_unknown, set_unknown, unknown_values
+from vlr.kinematics import HandModel
+from vlr.motion import MotionModel, ParticleState
+
+__all__ = ["motion_errors", "profile_unknown"]
+
+
+def _angles_deg(r: np.ndarray) -> np.ndarray:
+    """(P,) rotation angles [deg] of (P, 3, 3) rotations."""
+    c = (np.trace(r, axis1=1, axis2=2) - 1.0) / 2.0
+    return np.degrees(np.arccos(np.clip(c, -1.0, 1.0)))
+
+
+def motion_errors(p0: np.ndarray, r0: np.ndarray, p1: np.ndarray, r1: np.ndarray,
+                  t0, t1) -> tuple[np.ndarray, np.ndarray]:
+    """(P,) position [m] and orientation [deg] errors of the particles' predicted motions
+    (p0, r0) -> (p1, r1) against the true one t0 -> t1 (`sim.gap._motion_error`, vectorized)."""
+    dp_pred, dp_true = p1 - p0, t1.position - t0.position
+    dr_pred = r1 @ np.swapaxes(r0, 1, 2)
+    dr_true = t1.rotation @ t0.rotation.T
+    return (np.linalg.norm(dp_pred - dp_true, axis=1),
+            _angles_deg(dr_pred @ dr_true.T[None]))
+
+
+def profile_unknown(rec, model: HandModel, motion: MotionModel, spec: str,
+                    start: Callable[[ParticleState, int], None],
+                    values: np.ndarray | None = None, points: int = 25,
+                    sigma: tuple[float, float] = (0.2, 0.4)) -> dict:
+    """The cost of each candidate value of unknown `spec` over the recording (module
+    docstring).
+
+    Args:
+        rec: `sim.gap.Recording`.
+        model, motion: the model's hand (the true one) and motion model.
+        spec: an unknown as `vlr identify --unknown` takes it ("stiffness:thumb.distal").
+        start: puts a state at the true configuration before action k+1 at command u_k
+            (`sim.gap`'s start, in place).
+        values: the candidates; None: `points` values across the unknown's default prior.
+        sigma: the cost's units, position [mm] and orientation [deg].
+
+    Returns:
+        {"unknown", "truth", "values", "cost_restart", "cost_open_loop", "best_restart",
+        "best_open_loop", "actions", "failed"}; "failed" counts candidates whose solve
+        failed along the open-loop path (their cost is NaN).
+    """
+    try:
+        u = parse_unknown(spec, model, obj=motion.obj)
+    except (KeyError, ValueError) as exc:
+        raise UserError(f"--fit {spec!r}: {exc}") from None
+    if u.kind == "noise":
+        raise UserError(f"--fit {spec!r}: the likelihood's noise factor does not move the "
+                        "model; nothing to fit")
+    if values is None:
+        if not (isinstance(points, int) and points >= 2):
+            raise UserError(f"fit points {points!r} must be an integer >= 2")
+        values = np.linspace(u.prior[0], u.prior[1], points)
+    values = np.asarray(values, dtype=float)
+    n = len(values)
+    s_p, s_r = sigma
+
+    def at_truth(k: int) -> ParticleState:
+        st = ParticleState.at_truth(model, rec.truths[k]).take(np.zeros(n, dtype=int))
+        if (u.kind in ("mass", "com") and st.object_mass is None) or (
+                u.kind == "curvature" and st.surface_curvature is None):
+            hold_unknowns(st, [u], motion.obj)
+        set_unknown(st, u, values)
+        st.anchor_to_pose(model)  # a changed length keeps the true pose, as jitter does
+        return st
+
+    truth = _true_value(rec, u, model, motion)
+    cost_restart = np.zeros(n)
+    for k in range(len(rec.commands) - 1):
+        st = at_truth(k)
+        start(st, k)
+        p0, r0 = st.pos.copy(), st.rot.copy()
+        motion.solve(st, rec.commands[k + 1], u_from=rec.commands[k])
+        e_p, e_r = motion_errors(p0, r0, st.pos, st.rot, rec.truths[k], rec.truths[k + 1])
+        cost_restart += np.where(st.valid, (e_p * 1e3 / s_p) ** 2 + (e_r / s_r) ** 2, np.nan)
+    st = at_truth(0)
+    start(st, 0)
+    cost_open = np.zeros(n)
+    for k in range(1, len(rec.commands)):
+        pa, ra = st.pos.copy(), st.rot.copy()
+        motion.solve(st, rec.commands[k], u_from=rec.commands[k - 1])
+        e_p, e_r = motion_errors(pa, ra, st.pos, st.rot, rec.truths[k - 1], rec.truths[k])
+        cost_open += (e_p * 1e3 / s_p) ** 2 + (e_r / s_r) ** 2
+    cost_open = np.where(st.valid, cost_open, np.nan)
+    return {"unknown": spec, "truth": truth, "values": values.tolist(),
+            "sigma_pos_mm": s_p, "sigma_rot_deg": s_r,
+            "cost_restart": cost_restart.tolist(), "cost_open_loop": cost_open.tolist(),
+            "best_restart": _argmin(values, cost_restart),
+            "best_open_loop": _argmin(values, cost_open),
+            "actions": len(rec.commands) - 1, "failed": int((~st.valid).sum())}
+
+
+def _true_value(rec, u, model: HandModel, motion: MotionModel) -> float:
+    """The unknown's true value: the true hand's, or the object's from the sim's truth (else
+    from its spec, as the model holds it)."""
+    st = ParticleState.at_truth(model, rec.truths[0])
+    if (u.kind in ("mass", "com") and st.object_mass is None) or (
+            u.kind == "curvature" and st.surface_curvature is None):
+        hold_unknowns(st, [u], motion.obj)
+    return float(unknown_values(st, u)[0])
+
+
+def _argmin(values: np.ndarray, cost: np.ndarray) -> float:
+    ok = np.isfinite(cost)
+    return float(values[ok][np.argmin(cost[ok])]) if ok.any() else math.nan
