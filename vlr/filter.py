@@ -35,6 +35,7 @@ __all__ = [
     "unknown_values",
     "set_unknown",
     "hold_unknowns",
+    "draw_prior",
     "FilterConfig",
     "Summary",
     "IterationRecord",
@@ -242,6 +243,17 @@ def set_unknown(state: ParticleState, u: Unknown, values: np.ndarray) -> None:
         state.tendon[:, u.finger] = values
 
 
+def draw_prior(rng: np.random.Generator, u: Unknown, n: int,
+               shape: str = "uniform") -> np.ndarray:
+    """(n,) draws of unknown `u` over its prior (low, high): uniform, or for a scale unknown
+    (`LOG_PRIOR_KINDS`) with `shape` "log-uniform", uniform in its logarithm
+    (`FilterConfig.prior_shape`)."""
+    lo, hi = u.prior
+    if shape == "log-uniform" and u.kind in LOG_PRIOR_KINDS:
+        return np.exp(rng.uniform(math.log(lo), math.log(hi), n))
+    return rng.uniform(lo, hi, n)
+
+
 def hold_unknowns(state: ParticleState, unknowns: Sequence[Unknown],
                   obj: ObjectParams) -> None:
     """With the object's unknowns, each particle carries its own object (mass and centre of
@@ -338,6 +350,9 @@ def interval_width_deg(theta_samples: np.ndarray) -> float:
 # --------------------------------------------------------------------------- config and records
 
 CONTACT_PRIORS = ("pad", "surface")
+# How the scale unknowns are drawn over their priors (`FilterConfig.prior_shape`).
+PRIOR_SHAPES = ("uniform", "log-uniform")
+LOG_PRIOR_KINDS = ("stiffness", "tendon", "mass")
 
 # A prior of which no particle settles at the grasp command is drawn again this many times in
 # all: a small filter's unlucky draw (1000 particles in a task's check) is not a lost grasp.
@@ -361,6 +376,13 @@ class FilterConfig:
             particle's own), for three fingers; else "pad".
         unknowns: unknown-parameter specs (`parse_unknown`).
         priors: optional uniform prior (low, high) per unknown spec.
+        prior_shape: how the scale unknowns (`LOG_PRIOR_KINDS`: a spring, the tendon, the
+            object's mass; positive, with default priors a factor either way of the
+            nominal) are drawn over their (low, high): "uniform", or "log-uniform", uniform
+            in the logarithm, whose median is the geometric mean (the nominal, for the
+            default priors): a uniform draw on 0.25-4x the nominal puts its median at 2.1x
+            and two thirds of its mass above 1.5x (docs/RESULTS.md 5, session 35). Other
+            unknowns are drawn uniform either way.
         ess_fraction: tempering keeps ESS >= this fraction of P after weighting.
         jitter_h: Liu-West kernel bandwidth h. METHOD.md 8.2 found about 0.2; measured here
             on the synthetic world (20k particles, 5 seeds per case, docs/RESULTS.md 1),
@@ -396,6 +418,7 @@ class FilterConfig:
     contact_prior: str = "pad"
     unknowns: tuple[str, ...] = ()
     priors: dict[str, tuple[float, float]] = field(default_factory=dict)
+    prior_shape: str = "uniform"
     ess_fraction: float = 0.1
     jitter_h: float = 0.4
     liu_west_shrink: bool = True
@@ -408,6 +431,9 @@ class FilterConfig:
     anneal_stages: int = 1
 
     def __post_init__(self) -> None:
+        if self.prior_shape not in PRIOR_SHAPES:
+            raise ValueError(f"prior_shape {self.prior_shape!r}: expected one of "
+                             f"{PRIOR_SHAPES}")
         if self.contact_prior not in CONTACT_PRIORS:
             raise ValueError(f"contact_prior {self.contact_prior!r}: expected one of "
                              f"{CONTACT_PRIORS}")
@@ -571,7 +597,7 @@ class ParticleFilter:
         spread = rng.normal(0.0, cfg.contact_spread, (p, nf, 2))
         self._hold_object(state)
         for u in self.unknowns:
-            set_unknown(state, u, rng.uniform(u.prior[0], u.prior[1], p))
+            set_unknown(state, u, draw_prior(rng, u, p, cfg.prior_shape))
         centre = np.asarray(nominal_contact, dtype=float)[None]
         if cfg.contact_prior == "surface":
             # After the unknowns: a link's length moves its pad, a curvature its surface.

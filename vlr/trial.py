@@ -203,6 +203,8 @@ class TrialSettings:
         priors: {unknown spec: [low, high]} the uniform prior of an unknown in its SI unit
             (e.g. {"stiffness:thumb.distal": [0.01, 0.08]} N m/rad); an unknown not named
             keeps its default (`vlr.filter.parse_unknown`). Each must be among `unknowns`.
+        prior_shape: "uniform" or "log-uniform": how a spring's, the tendon's and the
+            object's mass's priors are drawn (`vlr.filter.FilterConfig.prior_shape`).
         noise_prior: [low, high] of the "noise" unknown's uniform prior (a factor on the
             likelihood's pose scales); None: `vlr.filter.NOISE_PRIOR`. Needs "noise" among
             the unknowns.
@@ -265,6 +267,7 @@ class TrialSettings:
     jitter_h: float | None = None
     noise_prior: tuple[float, float] | None = None
     priors: dict[str, tuple[float, float]] = field(default_factory=dict)
+    prior_shape: str = "uniform"
     object_mass: float | None = None
     object_com: tuple[float, float, float] | None = None
     object_curvature: float | None = None
@@ -427,6 +430,9 @@ class TrialSettings:
                     or not prior[0] <= prior[1]):
                 raise UserError(f"priors: {spec!r} {prior!r} must be [low, high] with low <= "
                                 "high, both finite")
+        from vlr.filter import PRIOR_SHAPES
+        if self.prior_shape not in PRIOR_SHAPES:
+            raise bad("prior_shape", f"one of {', '.join(PRIOR_SHAPES)}")
         if "noise" in self.priors and self.noise_prior is not None:
             raise bad("noise_prior", "given once: it is also in priors")
         object.__setattr__(self, "priors", {k: (float(a), float(b))
@@ -780,6 +786,7 @@ def identify_config(settings: TrialSettings, model):
                         priors={**settings.priors,
                                 **({} if settings.noise_prior is None
                                    else {"noise": settings.noise_prior})},
+                        prior_shape=settings.prior_shape,
                         theta_spread=float(np.radians(settings.grasp_guess[1])),
                         anneal_stages=settings.anneal_stages,
                         contact_prior=settings.contact_prior_in_effect,

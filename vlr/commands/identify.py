@@ -136,6 +136,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    metavar="SPEC=LOW,HIGH", help="the uniform prior of an --unknown in its SI "
                    "unit, e.g. stiffness:thumb.distal=0.01,0.08 [N m/rad] (repeatable; "
                    "default per kind: vlr.filter.parse_unknown)")
+    p.add_argument("--prior-shape", choices=("uniform", "log-uniform"), default="uniform",
+                   help="how a spring's, the tendon's and the object's mass's priors are "
+                   "drawn: uniform, or uniform in the logarithm (median at the nominal for "
+                   "the default priors; default uniform)")
     p.add_argument("--noise-prior", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
                    help="with --unknown noise: the uniform prior of the factor on the "
                    "likelihood's pose scales (default 0.25 1)")
@@ -249,7 +253,7 @@ def run(args: argparse.Namespace) -> int:
         object_curvature=args.object_curvature,
         ramp_time=args.ramp_time, cone_return=args.cone_return,
         link_scaling=args.link_scaling, jitter_h=args.jitter_h, noise_prior=args.noise_prior,
-        priors=dict(args.prior),
+        priors=dict(args.prior), prior_shape=args.prior_shape,
         action_range_mm=args.action_range_mm, action_band_mm=args.action_band_mm)
     bar = None
 
