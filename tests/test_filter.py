@@ -9,6 +9,7 @@ from vlr.filter import (
     FilterConfig,
     ParticleFilter,
     Summary,
+    draw_prior,
     effective_sample_size,
     interval_width_deg,
     parse_unknown,
@@ -267,3 +268,27 @@ def test_a_particle_at_the_truth_stays_there(modelo):
     pf.step(u, world.observe())
     distance = np.abs(pf.pack(pf.state) - pf.pack(world.state)[0]).max(axis=1)
     assert distance.min() < 1e-9
+
+
+def test_a_log_uniform_prior_draws_the_scale_unknowns_about_their_nominal(modelo):
+    """`prior_shape="log-uniform"`: a spring's default prior 0.25-4x the nominal drawn
+    uniform in the logarithm has its median at the nominal (a uniform draw, at 2.125x);
+    a length is drawn uniform either way."""
+    rng = np.random.default_rng(0)
+    spring = parse_unknown("stiffness:thumb.distal", modelo)
+    nominal = modelo.stiffness[modelo.finger_index("thumb"), modelo.joint_index("distal")]
+    log_draws = draw_prior(rng, spring, 20000, "log-uniform")
+    flat = draw_prior(rng, spring, 20000)
+    assert np.all((spring.prior[0] <= log_draws) & (log_draws <= spring.prior[1]))
+    assert np.median(log_draws) == pytest.approx(nominal, rel=0.05)
+    assert np.median(flat) == pytest.approx(2.125 * nominal, rel=0.05)
+    length = parse_unknown("length:left.proximal", modelo)
+    a = draw_prior(np.random.default_rng(1), length, 100, "log-uniform")
+    b = draw_prior(np.random.default_rng(1), length, 100)
+    np.testing.assert_array_equal(a, b)
+    pf = _run(modelo, 3, steps=0, unknowns=("stiffness:thumb.distal",),
+              prior_shape="log-uniform")
+    col = pf.pack(pf.state)[:, -1]
+    assert np.median(col) < 1.5 * nominal
+    with pytest.raises(ValueError, match="prior_shape 'cubic'"):
+        FilterConfig(prior_shape="cubic")

@@ -289,3 +289,18 @@ def test_the_action_range_reaches_the_identification_and_bad_ones_are_named():
                        (dict(action_band_mm=-1.0), "action_band_mm")):
         with pytest.raises(UserError, match=match):
             TrialSettings(**bad)
+
+
+def test_the_prior_shape_reaches_the_filter_and_a_bad_one_is_named():
+    from vlr.kinematics import HandModel
+    from vlr.spec import load_hand
+    from vlr.trial import identify_config
+
+    model = HandModel.from_spec(load_hand("modelo"))
+    assert identify_config(TrialSettings(backend="synthetic", particles=50),
+                           model).filter.prior_shape == "uniform"
+    assert identify_config(TrialSettings(backend="synthetic", particles=50,
+                                         prior_shape="log-uniform"),
+                           model).filter.prior_shape == "log-uniform"
+    with pytest.raises(UserError, match="prior_shape 'cubic'"):
+        TrialSettings(prior_shape="cubic")
