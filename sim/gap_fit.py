@@ -73,7 +73,8 @@ def profile_unknown(rec, model: HandModel, motion: MotionModel, spec: str,
     Returns:
         {"unknown", "truth", "values", "cost_restart", "cost_open_loop", "best_restart",
         "best_open_loop", "actions", "failed"}; "failed" counts candidates whose solve
-        failed along the open-loop path (their cost is NaN).
+        failed along the open-loop path (their cost is NaN); a best is NaN where the cost
+        does not depend on the value (`_argmin`).
     """
     try:
         u = parse_unknown(spec, model, obj=motion.obj)
@@ -136,5 +137,9 @@ def _true_value(rec, u, model: HandModel, motion: MotionModel) -> float:
 
 
 def _argmin(values: np.ndarray, cost: np.ndarray) -> float:
+    """The value of least cost; NaN if none solved or the cost does not depend on the value
+    (a rung without the term the unknown enters, e.g. the mass without the object's weight)."""
     ok = np.isfinite(cost)
-    return float(values[ok][np.argmin(cost[ok])]) if ok.any() else math.nan
+    if not ok.any() or np.ptp(cost[ok]) <= 1e-9 * max(1.0, float(np.abs(cost[ok]).max())):
+        return math.nan
+    return float(values[ok][np.argmin(cost[ok])])

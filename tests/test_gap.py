@@ -206,6 +206,10 @@ def test_the_model_wants_the_true_thumb_spring_from_the_true_states():
     mass = measure_gap(rec, _ALL, replace(settings, fit="mass", fit_range=None,
                                           fit_points=5))["fit"]
     assert mass["truth"] > 0 and len(mass["values"]) == 5 and np.isfinite(mass["best_restart"])
+    # Without the object's weight in the model its mass moves nothing: no best, not the first.
+    flat = measure_gap(rec, _BASE, replace(settings, fit="mass", fit_range=None,
+                                           fit_points=5))["fit"]
+    assert np.isnan(flat["best_restart"]) and np.isnan(flat["best_open_loop"])
 
 
 @pytest.mark.parametrize("args, message", [
