@@ -383,6 +383,11 @@ class FilterConfig:
             default priors): a uniform draw on 0.25-4x the nominal puts its median at 2.1x
             and two thirds of its mass above 1.5x (docs/RESULTS.md 5, session 35). Other
             unknowns are drawn uniform either way.
+        unknown_warmup: for the grasp's update and the first `unknown_warmup - 1` actions the
+            unknowns are drawn afresh from their prior after each resampling, so that while
+            the joints and contacts are still spread the likelihood does not select them (a
+            stiffer spring damps the motion a wrong configuration predicts: docs/RESULTS.md
+            5, session 35); 0: off.
         ess_fraction: tempering keeps ESS >= this fraction of P after weighting.
         jitter_h: Liu-West kernel bandwidth h. METHOD.md 8.2 found about 0.2; measured here
             on the synthetic world (20k particles, 5 seeds per case, docs/RESULTS.md 1),
@@ -419,6 +424,7 @@ class FilterConfig:
     unknowns: tuple[str, ...] = ()
     priors: dict[str, tuple[float, float]] = field(default_factory=dict)
     prior_shape: str = "uniform"
+    unknown_warmup: int = 0
     ess_fraction: float = 0.1
     jitter_h: float = 0.4
     liu_west_shrink: bool = True
@@ -431,6 +437,9 @@ class FilterConfig:
     anneal_stages: int = 1
 
     def __post_init__(self) -> None:
+        if isinstance(self.unknown_warmup, bool) or not (
+                isinstance(self.unknown_warmup, int) and self.unknown_warmup >= 0):
+            raise ValueError(f"unknown_warmup {self.unknown_warmup!r} must be an integer >= 0")
         if self.prior_shape not in PRIOR_SHAPES:
             raise ValueError(f"prior_shape {self.prior_shape!r}: expected one of "
                              f"{PRIOR_SHAPES}")
@@ -698,12 +707,20 @@ class ParticleFilter:
         ci = self.ci_deg(x)
         tm["summary"] += time.perf_counter() - t
         t = time.perf_counter()
+        if self.iteration < cfg.unknown_warmup:
+            self._redraw_unknowns(x)
         self._jitter(x, idx)
         tm["jitter"] = time.perf_counter() - t
         rec = IterationRecord(self.iteration, self.command, prior, posterior, ess, beta,
                               n_invalid, ci, stages)
         self.history.append(rec)
         return rec
+
+    def _redraw_unknowns(self, x: np.ndarray) -> None:
+        """The unknowns' columns of `x` drawn afresh from their priors (`unknown_warmup`)."""
+        base = x.shape[1] - len(self.unknowns)
+        for j, u in enumerate(self.unknowns):
+            x[:, base + j] = draw_prior(self.rng, u, len(x), self.config.prior_shape)
 
     def _log_likelihood(self, state: ParticleState, observation: PoseObservation) -> np.ndarray:
         """Eq. 5 per particle; with `motion_fraction`, its scales grow with each particle's

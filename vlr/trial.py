@@ -205,6 +205,8 @@ class TrialSettings:
             keeps its default (`vlr.filter.parse_unknown`). Each must be among `unknowns`.
         prior_shape: "uniform" or "log-uniform": how a spring's, the tendon's and the
             object's mass's priors are drawn (`vlr.filter.FilterConfig.prior_shape`).
+        unknown_warmup: updates during which the unknowns are drawn afresh from their prior
+            (`vlr.filter.FilterConfig.unknown_warmup`); 0: off.
         noise_prior: [low, high] of the "noise" unknown's uniform prior (a factor on the
             likelihood's pose scales); None: `vlr.filter.NOISE_PRIOR`. Needs "noise" among
             the unknowns.
@@ -268,6 +270,7 @@ class TrialSettings:
     noise_prior: tuple[float, float] | None = None
     priors: dict[str, tuple[float, float]] = field(default_factory=dict)
     prior_shape: str = "uniform"
+    unknown_warmup: int = 0
     object_mass: float | None = None
     object_com: tuple[float, float, float] | None = None
     object_curvature: float | None = None
@@ -433,6 +436,8 @@ class TrialSettings:
         from vlr.filter import PRIOR_SHAPES
         if self.prior_shape not in PRIOR_SHAPES:
             raise bad("prior_shape", f"one of {', '.join(PRIOR_SHAPES)}")
+        if not (is_int(self.unknown_warmup) and self.unknown_warmup >= 0):
+            raise bad("unknown_warmup", "an integer >= 0")
         if "noise" in self.priors and self.noise_prior is not None:
             raise bad("noise_prior", "given once: it is also in priors")
         object.__setattr__(self, "priors", {k: (float(a), float(b))
@@ -787,6 +792,7 @@ def identify_config(settings: TrialSettings, model):
                                 **({} if settings.noise_prior is None
                                    else {"noise": settings.noise_prior})},
                         prior_shape=settings.prior_shape,
+                        unknown_warmup=settings.unknown_warmup,
                         theta_spread=float(np.radians(settings.grasp_guess[1])),
                         anneal_stages=settings.anneal_stages,
                         contact_prior=settings.contact_prior_in_effect,
