@@ -255,3 +255,20 @@ def test_every_identify_option_is_documented():
     doc = (pathlib.Path(__file__).parents[1] / "docs" / "IDENTIFY.md").read_text()
     missing = sorted(o for o in options if not re.search(re.escape(o) + r"(?![\w-])", doc))
     assert not missing, f"docs/IDENTIFY.md does not mention {missing}"
+
+
+def test_identify_says_when_the_grasp_prior_missed_the_truth(tmp_path, capsys):
+    # The synthetic toy block grasps with its thumb's distal joint near 64 degrees; the sim's
+    # guess (-10, 15) with the synthetic world's 3-degree spread starts 50 degrees off it
+    # (RESULTS.md 5, session 35). Scored against the truth, the run says so.
+    common = ["identify", "--backend", "synthetic", "--object", "toy_block", "--hand",
+              "modelo_thumb45", "--particles", "1000", "--max-iterations", "1", "--seed", "0"]
+    assert main(common + ["--out", str(tmp_path / "own")]) == 0
+    own = json.loads((tmp_path / "own" / "result.json").read_text())
+    assert own["prior_coverage"] == 1.0
+    assert "missed the grasp" not in capsys.readouterr().out
+    assert main(common + ["--out", str(tmp_path / "off"),
+                          "--nominal-theta-deg", "-10", "15"]) == 0
+    off = json.loads((tmp_path / "off" / "result.json").read_text())
+    assert off["prior_coverage"] <= 0.5
+    assert "missed the grasp" in capsys.readouterr().out

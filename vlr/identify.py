@@ -102,6 +102,9 @@ class Score:
     # The same errors of the posterior median (the estimate of least absolute error).
     theta_error_median_deg: np.ndarray | None = None
     unknown_error_median: dict[str, float] | None = None
+    # Whether each true joint lies in the 95% interval of the step's prior (before the
+    # weighting): at the grasp, whether the user's guess and spread held the truth at all.
+    theta_prior_covered: np.ndarray | None = None
 
 
 @dataclass
@@ -146,6 +149,7 @@ def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
     err_med = np.degrees(np.abs(post.median[:n_th] - t))
     cov = (post.low[:n_th] <= t) & (t <= post.high[:n_th])
     miss = np.degrees(np.maximum(np.maximum(post.low[:n_th] - t, t - post.high[:n_th]), 0.0))
+    prior_cov = (rec.prior.low[:n_th] <= t) & (t <= rec.prior.high[:n_th])
     base = len(post.mean) - len(pf.unknowns)
     ue, uc, ue_med = {}, {}, {}
     for j, u in enumerate(pf.unknowns):
@@ -168,7 +172,7 @@ def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
         ue[u.spec] = float(post.mean[base + j] - true)
         ue_med[u.spec] = float(post.median[base + j] - true)
         uc[u.spec] = bool(post.low[base + j] <= true <= post.high[base + j])
-    return Score(err, cov, ue, uc, miss, t.copy(), err_med, ue_med)
+    return Score(err, cov, ue, uc, miss, t.copy(), err_med, ue_med, prior_cov)
 
 
 def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],

@@ -89,6 +89,13 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
             # absolute error the paper reports (vlr.filter.Summary).
             out["errors_median"] = _errors(s.theta_error_median_deg.reshape(n, k),
                                            s.unknown_error_median or {}, model)
+        first = result.scores[0]
+        if first.theta_prior_covered is not None:
+            # Scoring only: the share of true joints inside the grasp prior's 95% interval.
+            # Low, the guess (nominal_theta_deg) or its spread missed the grasp, and the
+            # filter's answer says more of the guess than of the hand (RESULTS.md 5, session
+            # 35: a synthetic run started 50 degrees off).
+            out["prior_coverage"] = float(np.mean(first.theta_prior_covered))
         covered = list(s.theta_covered) + list(s.unknown_covered.values())
         out["coverage"] = float(np.mean(covered))
         if s.theta_miss_deg is not None:

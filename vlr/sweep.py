@@ -274,6 +274,7 @@ COLUMNS: list[tuple[str, tuple[str, ...]]] = [
     ("contact_mm", ("result", "errors", "contact_mm_mean")),
     ("coverage", ("result", "coverage")),
     ("coverage_tolerant", ("result", "coverage_tolerant")),
+    ("prior_coverage", ("result", "prior_coverage")),
     ("s_per_iteration", ("result", "timing", "filter_s_per_iteration_median")),
     ("grasp_lost_at", ("result", "grasp_lost_at")),
 ]

@@ -16,6 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
+# Below this share of true joints inside the grasp prior's intervals (scored against the
+# sim's or the synthetic world's truth), the run's table says the guess missed the grasp.
+PRIOR_COVERAGE_WARN = 0.5
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("identify", help="self-identify the hand-object system (joint angles, "
@@ -342,6 +346,13 @@ def format_table(result, summary: dict, model) -> str:
                      f"{err.get('contact_mm_mean', float('nan')):.2f} mm; coverage "
                      f"{summary['coverage']:.2f} (within 0.1 deg: "
                      f"{summary.get('coverage_tolerant', float('nan')):.2f})")
+        if summary.get("prior_coverage") is not None:
+            share = summary["prior_coverage"]
+            lines.append(f"the grasp prior's 95% intervals held {share:.0%} of the true "
+                         "joints" + ("" if share >= PRIOR_COVERAGE_WARN else
+                                     ": the guess (--nominal-theta-deg) or its spread "
+                                     "(--prior-spread-deg) missed the grasp, and the answer "
+                                     "leans on it"))
     lines.append(f"filter: {summary['timing']['filter_s_per_iteration_median']:.3f} s per "
                  "iteration (median)")
     if summary.get("sigma"):
