@@ -308,3 +308,20 @@ def test_an_unknown_warmup_keeps_the_unknowns_at_their_prior(modelo):
     assert sd_free < 0.8 * sd_held
     with pytest.raises(ValueError, match="unknown_warmup -1"):
         FilterConfig(unknown_warmup=-1)
+
+
+def test_an_unknown_discount_widens_the_unknowns_after_each_update(modelo):
+    """`unknown_discount`: the jittered particles' unknowns spread about their mean by
+    1/sqrt(delta) more, so after the same updates the unknown's spread is wider than
+    without it, while the joints are drawn as before."""
+    spec = "stiffness:thumb.distal"
+    faded = _run(modelo, 3, steps=2, unknowns=(spec,), unknown_discount=0.5)
+    free = _run(modelo, 3, steps=2, unknowns=(spec,))
+    sd_faded = faded.pack(faded.state)[:, -1].std()
+    sd_free = free.pack(free.state)[:, -1].std()
+    assert sd_faded > 1.2 * sd_free
+    lo, hi = faded.unknowns[0].prior
+    assert faded.pack(faded.state)[:, -1].min() >= lo
+    assert faded.pack(faded.state)[:, -1].max() <= hi
+    with pytest.raises(ValueError, match="unknown_discount 0"):
+        FilterConfig(unknown_discount=0.0)

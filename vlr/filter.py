@@ -388,6 +388,12 @@ class FilterConfig:
             the joints and contacts are still spread the likelihood does not select them (a
             stiffer spring damps the motion a wrong configuration predicts: docs/RESULTS.md
             5, session 35); 0: off.
+        unknown_discount: delta in (0, 1], the discount factor of West and Harrison's
+            artificial evolution of the unknowns: after each Liu-West draw the jittered
+            particles' unknowns spread about their mean by 1/sqrt(delta) more, so the
+            posterior's memory of old observations fades (about 1/(1 - delta) actions) and
+            an estimate lifted by the first actions, whose joints were still spread, can walk
+            back at the pace of the newer ones (docs/RESULTS.md 5, session 37); 1: off.
         ess_fraction: tempering keeps ESS >= this fraction of P after weighting.
         jitter_h: Liu-West kernel bandwidth h. METHOD.md 8.2 found about 0.2; measured here
             on the synthetic world (20k particles, 5 seeds per case, docs/RESULTS.md 1),
@@ -425,6 +431,7 @@ class FilterConfig:
     priors: dict[str, tuple[float, float]] = field(default_factory=dict)
     prior_shape: str = "uniform"
     unknown_warmup: int = 0
+    unknown_discount: float = 1.0
     ess_fraction: float = 0.1
     jitter_h: float = 0.4
     liu_west_shrink: bool = True
@@ -440,6 +447,8 @@ class FilterConfig:
         if isinstance(self.unknown_warmup, bool) or not (
                 isinstance(self.unknown_warmup, int) and self.unknown_warmup >= 0):
             raise ValueError(f"unknown_warmup {self.unknown_warmup!r} must be an integer >= 0")
+        if not 0.0 < self.unknown_discount <= 1.0:
+            raise ValueError(f"unknown_discount {self.unknown_discount!r} must be in (0, 1]")
         if self.prior_shape not in PRIOR_SHAPES:
             raise ValueError(f"prior_shape {self.prior_shape!r}: expected one of "
                              f"{PRIOR_SHAPES}")
@@ -796,8 +805,15 @@ class ParticleFilter:
             first[1:] = parents[1:] != parents[:-1]
             x_new[first] = x[first]
             moved = ~first
-        # Keep unknowns inside their priors (reflect at the bounds).
         base = x.shape[1] - len(self.unknowns)
+        if cfg.unknown_discount < 1.0 and self.unknowns:
+            # Artificial evolution: only the jittered rows, since a kept parent's state is
+            # the equilibrium of its own unknowns and is not settled again.
+            rows = slice(None) if moved is None else moved
+            u_mean = mean[base:]
+            x_new[rows, base:] = u_mean + (x_new[rows, base:] - u_mean) / np.sqrt(
+                cfg.unknown_discount)
+        # Keep unknowns inside their priors (reflect at the bounds).
         for j, u in enumerate(self.unknowns):
             lo, hi = u.prior
             col = x_new[:, base + j]

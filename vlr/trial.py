@@ -207,6 +207,8 @@ class TrialSettings:
             object's mass's priors are drawn (`vlr.filter.FilterConfig.prior_shape`).
         unknown_warmup: updates during which the unknowns are drawn afresh from their prior
             (`vlr.filter.FilterConfig.unknown_warmup`); 0: off.
+        unknown_discount: the discount factor of the unknowns' artificial evolution, in
+            (0, 1] (`vlr.filter.FilterConfig.unknown_discount`); 1: off.
         noise_prior: [low, high] of the "noise" unknown's uniform prior (a factor on the
             likelihood's pose scales); None: `vlr.filter.NOISE_PRIOR`. Needs "noise" among
             the unknowns.
@@ -271,6 +273,7 @@ class TrialSettings:
     priors: dict[str, tuple[float, float]] = field(default_factory=dict)
     prior_shape: str = "uniform"
     unknown_warmup: int = 0
+    unknown_discount: float = 1.0
     object_mass: float | None = None
     object_com: tuple[float, float, float] | None = None
     object_curvature: float | None = None
@@ -438,6 +441,8 @@ class TrialSettings:
             raise bad("prior_shape", f"one of {', '.join(PRIOR_SHAPES)}")
         if not (is_int(self.unknown_warmup) and self.unknown_warmup >= 0):
             raise bad("unknown_warmup", "an integer >= 0")
+        if not (is_real(self.unknown_discount) and 0.0 < self.unknown_discount <= 1.0):
+            raise bad("unknown_discount", "a number in (0, 1]")
         if "noise" in self.priors and self.noise_prior is not None:
             raise bad("noise_prior", "given once: it is also in priors")
         object.__setattr__(self, "priors", {k: (float(a), float(b))
@@ -793,6 +798,7 @@ def identify_config(settings: TrialSettings, model):
                                    else {"noise": settings.noise_prior})},
                         prior_shape=settings.prior_shape,
                         unknown_warmup=settings.unknown_warmup,
+                        unknown_discount=settings.unknown_discount,
                         theta_spread=float(np.radians(settings.grasp_guess[1])),
                         anneal_stages=settings.anneal_stages,
                         contact_prior=settings.contact_prior_in_effect,

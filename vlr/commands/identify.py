@@ -148,6 +148,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="draw the unknowns afresh from their prior after each of the first N "
                    "updates (the grasp's and N-1 actions), while the joints are still spread "
                    "(default 0: off)")
+    p.add_argument("--unknown-discount", type=float, default=1.0, metavar="DELTA",
+                   help="discount factor in (0, 1] of the unknowns' artificial evolution: "
+                   "their spread grows by 1/sqrt(DELTA) at each jitter, so old observations "
+                   "fade over about 1/(1 - DELTA) actions (default 1: off)")
     p.add_argument("--noise-prior", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
                    help="with --unknown noise: the uniform prior of the factor on the "
                    "likelihood's pose scales (default 0.25 1)")
@@ -262,7 +266,7 @@ def run(args: argparse.Namespace) -> int:
         ramp_time=args.ramp_time, cone_return=args.cone_return,
         link_scaling=args.link_scaling, jitter_h=args.jitter_h, noise_prior=args.noise_prior,
         priors=dict(args.prior), prior_shape=args.prior_shape,
-        unknown_warmup=args.unknown_warmup,
+        unknown_warmup=args.unknown_warmup, unknown_discount=args.unknown_discount,
         action_range_mm=args.action_range_mm, action_band_mm=args.action_band_mm)
     bar = None
 
