@@ -104,6 +104,9 @@ class GapSettings:
         fit_points: the profile's values.
         fit_sigma: the profile cost's units, position [mm] and orientation [deg]: the sim
             trials' likelihood scales (`vlr.trial.ROLLING_TURN_SIGMA`).
+        fit_turn_deg: > 0: the profile's cost is the filter's likelihood with this turn
+            scale [deg] (`sim.gap_fit.likelihood_cost`; the sim trials' is 1); 0: squared
+            motion errors without the turn.
     """
 
     object: str = "apple"
@@ -127,10 +130,13 @@ class GapSettings:
     fit_range: tuple[float, float] | None = None
     fit_points: int = 25
     fit_sigma: tuple[float, float] = (0.2, 0.4)
+    fit_turn_deg: float = 0.0
 
     def __post_init__(self) -> None:
         if not isinstance(self.fit_points, int) or self.fit_points < 2:
             raise UserError(f"fit points {self.fit_points!r} must be an integer >= 2")
+        if not (math.isfinite(self.fit_turn_deg) and self.fit_turn_deg >= 0):
+            raise UserError(f"fit turn {self.fit_turn_deg!r} [deg] must be finite and >= 0")
         if self.fit_range is not None:
             lo, hi = self.fit_range
             if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
@@ -370,7 +376,7 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
         fit = {"fit": profile_unknown(
             rec, model, motion, settings.fit,
             lambda st, k: _settle_at(motion, settle, model, rec, st, k, settings.start),
-            values, settings.fit_points, settings.fit_sigma)}
+            values, settings.fit_points, settings.fit_sigma, settings.fit_turn_deg)}
     return {
         "terms": list(terms),
         "actions": len(rows),
@@ -544,7 +550,10 @@ def format_report(rep: dict) -> str:
             lines.append(f"{name:28s} {f['best_restart']:10.4g} {f['best_open_loop']:10.4g} "
                          f"{f['truth']:10.4g}"
                          + (f"  ({f['failed']} values failed)" if f["failed"] else ""))
-        lines.append("fit: the value whose predicted motions cost least (squared errors over "
+        turn = f0.get("sigma_turn_deg", 0.0)
+        how = (f"the filter's likelihood with a {turn:g} deg turn" if turn > 0
+               else "squared errors")
+        lines.append(f"fit: the value whose predicted motions cost least ({how} over "
                      f"{f0['sigma_pos_mm']:g} mm and {f0['sigma_rot_deg']:g} deg), each action "
                      "from the true state (restart) or all in sequence (open loop)")
     return "\n".join(lines)
@@ -603,6 +612,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="the profile's range [SI units] (default: the unknown's prior)")
     p.add_argument("--fit-points", type=int, default=GapSettings.fit_points,
                    help=f"the profile's values (default {GapSettings.fit_points})")
+    p.add_argument("--fit-turn-deg", type=float, default=0.0, metavar="DEG",
+                   help="cost the profile with the filter's likelihood and this turn scale "
+                   "(the sim trials' is 1; default 0: squared motion errors, no turn)")
     p.add_argument("--json", help="write the report (per object, per model rung) as JSON")
     p.set_defaults(func=run)
 
@@ -639,7 +651,8 @@ def run(args: argparse.Namespace) -> int:
                                exact_cylinder=args.exact_cylinder,
                                limit_stiffness=args.limit_stiffness, start=args.start,
                                ramp_time=args.ramp_time, fit=args.fit,
-                               fit_range=args.fit_range, fit_points=args.fit_points)
+                               fit_range=args.fit_range, fit_points=args.fit_points,
+                               fit_turn_deg=args.fit_turn_deg)
         rep = gap_report(settings)
         print(format_report(rep) + "\n", flush=True)
         reports.append(rep)

@@ -11,7 +11,10 @@ posterior's shape), not the model's.
 The profile: each candidate value is one particle (vectorized), every particle at the true
 state with only that parameter changed (contacts re-anchored to the true pose). Its cost is
 the sum over actions of the squared motion errors in the likelihood's units (Eq. 12 without
-the turn: position over `sigma_pos`, orientation over `sigma_rot`):
+the turn: position over `sigma_pos`, orientation over `sigma_rot`), or, with a turn scale
+s > 0, minus twice the filter's own log-likelihood with the turn term (Eq. 12 with the
+covariance D + s^2 v v^T and its normalisation, `vlr.observation.ObservationModel`), each
+particle's predicted pose put where the true motion from its own start would take it:
 
 * per action ("restart"): each action predicted from the true state before it, as
   `vlr gap`'s per-action ratio;
@@ -33,8 +36,9 @@ from vlr.errors import UserError
 from vlr.filter import hold_unknowns, parse_unknown, set_unknown, unknown_values
 from vlr.kinematics import HandModel
 from vlr.motion import MotionModel, ParticleState
+from vlr.observation import ObservationModel, PomObservation
 
-__all__ = ["motion_errors", "profile_unknown"]
+__all__ = ["likelihood_cost", "motion_errors", "profile_unknown"]
 
 
 def _angles_deg(r: np.ndarray) -> np.ndarray:
@@ -54,10 +58,27 @@ def motion_errors(p0: np.ndarray, r0: np.ndarray, p1: np.ndarray, r1: np.ndarray
             _angles_deg(dr_pred @ dr_true.T[None]))
 
 
+def likelihood_cost(st: ParticleState, p0: np.ndarray, r0: np.ndarray, t0, t1,
+                    obs_model: ObservationModel) -> np.ndarray:
+    """(P,) minus twice the filter's log-likelihood (Eq. 12 with the turn term) of each
+    particle's predicted motion (p0, r0) -> (st.pos, st.rot) against the true one t0 -> t1.
+
+    The likelihood weighs a pose against one observed pose. Each particle is moved by the
+    difference between the true start and its own (p0, r0), so that its error is its motion's
+    error (as `motion_errors`) while the turn's axis comes from its own contacts."""
+    shifted = st.copy()
+    # R' = R1 R0^T R_t0: the particle's predicted rotation over the action, applied to the
+    # true start; the anchors are in the object frame and follow the pose.
+    shifted.rot = st.rot @ np.swapaxes(r0, 1, 2) @ t0.rotation[None]
+    shifted.pos = st.pos - p0 + t0.position[None]
+    obs = PomObservation(position=t1.position, rotation=t1.rotation)
+    return -2.0 * obs_model.log_likelihood(shifted, obs)
+
+
 def profile_unknown(rec, model: HandModel, motion: MotionModel, spec: str,
                     start: Callable[[ParticleState, int], None],
                     values: np.ndarray | None = None, points: int = 25,
-                    sigma: tuple[float, float] = (0.2, 0.4)) -> dict:
+                    sigma: tuple[float, float] = (0.2, 0.4), turn_deg: float = 0.0) -> dict:
     """The cost of each candidate value of unknown `spec` over the recording (module
     docstring).
 
@@ -90,6 +111,16 @@ def profile_unknown(rec, model: HandModel, motion: MotionModel, spec: str,
     values = np.asarray(values, dtype=float)
     n = len(values)
     s_p, s_r = sigma
+    obs_model = (ObservationModel(sigma_pos=s_p * 1e-3, sigma_rot=math.radians(s_r),
+                                  sigma_turn=math.radians(turn_deg),
+                                  opposed=model.finger_index("thumb"))
+                 if turn_deg > 0 else None)
+
+    def cost(st: ParticleState, p0, r0, t0, t1) -> np.ndarray:
+        if obs_model is not None:
+            return np.where(st.valid, likelihood_cost(st, p0, r0, t0, t1, obs_model), np.nan)
+        e_p, e_r = motion_errors(p0, r0, st.pos, st.rot, t0, t1)
+        return np.where(st.valid, (e_p * 1e3 / s_p) ** 2 + (e_r / s_r) ** 2, np.nan)
 
     def at_truth(k: int) -> ParticleState:
         st = ParticleState.at_truth(model, rec.truths[k]).take(np.zeros(n, dtype=int))
@@ -107,19 +138,18 @@ def profile_unknown(rec, model: HandModel, motion: MotionModel, spec: str,
         start(st, k)
         p0, r0 = st.pos.copy(), st.rot.copy()
         motion.solve(st, rec.commands[k + 1], u_from=rec.commands[k])
-        e_p, e_r = motion_errors(p0, r0, st.pos, st.rot, rec.truths[k], rec.truths[k + 1])
-        cost_restart += np.where(st.valid, (e_p * 1e3 / s_p) ** 2 + (e_r / s_r) ** 2, np.nan)
+        cost_restart += cost(st, p0, r0, rec.truths[k], rec.truths[k + 1])
     st = at_truth(0)
     start(st, 0)
     cost_open = np.zeros(n)
     for k in range(1, len(rec.commands)):
         pa, ra = st.pos.copy(), st.rot.copy()
         motion.solve(st, rec.commands[k], u_from=rec.commands[k - 1])
-        e_p, e_r = motion_errors(pa, ra, st.pos, st.rot, rec.truths[k - 1], rec.truths[k])
-        cost_open += (e_p * 1e3 / s_p) ** 2 + (e_r / s_r) ** 2
+        # A particle whose solve failed stays NaN to the end (its cost is not comparable).
+        cost_open += cost(st, pa, ra, rec.truths[k - 1], rec.truths[k])
     cost_open = np.where(st.valid, cost_open, np.nan)
     return {"unknown": spec, "truth": truth, "values": values.tolist(),
-            "sigma_pos_mm": s_p, "sigma_rot_deg": s_r,
+            "sigma_pos_mm": s_p, "sigma_rot_deg": s_r, "sigma_turn_deg": turn_deg,
             "cost_restart": cost_restart.tolist(), "cost_open_loop": cost_open.tolist(),
             "best_restart": _argmin(values, cost_restart),
             "best_open_loop": _argmin(values, cost_open),
