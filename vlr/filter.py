@@ -391,9 +391,10 @@ class FilterConfig:
         unknown_discount: delta in (0, 1], the discount factor of West and Harrison's
             artificial evolution of the unknowns: after each Liu-West draw the jittered
             particles' unknowns spread about their mean by 1/sqrt(delta) more, so the
-            posterior's memory of old observations fades (about 1/(1 - delta) actions) and
-            an estimate lifted by the first actions, whose joints were still spread, can walk
-            back at the pace of the newer ones (docs/RESULTS.md 5, session 37); 1: off.
+            posterior's memory of old observations fades (about 1/(1 - delta) actions), for
+            an estimate the first actions, whose joints were still spread, may have misled.
+            Measured not a win on the spring row: its lean is not the first actions' memory
+            (docs/RESULTS.md 5, session 37); 1: off.
         ess_fraction: tempering keeps ESS >= this fraction of P after weighting.
         jitter_h: Liu-West kernel bandwidth h. METHOD.md 8.2 found about 0.2; measured here
             on the synthetic world (20k particles, 5 seeds per case, docs/RESULTS.md 1),
