@@ -313,7 +313,7 @@ def test_an_unknown_warmup_keeps_the_unknowns_at_their_prior(modelo):
 def test_an_unknown_discount_widens_the_unknowns_after_each_update(modelo):
     """`unknown_discount`: the jittered particles' unknowns spread about their mean by
     1/sqrt(delta) more, so after the same updates the unknown's spread is wider than
-    without it, while the joints are drawn as before."""
+    without it, and stays inside its prior."""
     spec = "stiffness:thumb.distal"
     faded = _run(modelo, 3, steps=2, unknowns=(spec,), unknown_discount=0.5)
     free = _run(modelo, 3, steps=2, unknowns=(spec,))

@@ -27,13 +27,21 @@ DRAWS = 60
 SIGMA = (0.2, 0.4)  # the sim trials' likelihood scales, mm and deg
 
 
-def main(seed: int, sd_deg: float, actions: int) -> None:
+def spring_row_recording(seed: int, actions: int):
+    """The spring row's random actions recorded in the sim (toy block, modelo_thumb45, the
+    0.1 s ramp), with the filter's motion model (rolling, stops at 17 N m/rad) on the true
+    hand and the settle config of a particle at the grasp: (rec, model, motion, settle).
+    Also used by spring_joint_lean.py."""
     rec = record_actions(GapSettings(object="toy_block", hand="modelo_thumb45", seed=seed,
                                      actions=actions, ramp_time=0.1))
     model = HandModel.from_spec(rec.hand_spec)
     cfg = replace(MotionConfig().with_rolling(True), limit_stiffness=17.0)  # the filter's
     motion = MotionModel(model, ObjectParams.from_spec(rec.object_spec), cfg)
-    settle = replace(cfg, jump_theta=1.0, jump_pos=0.05, max_iter=200)
+    return rec, model, motion, replace(cfg, jump_theta=1.0, jump_pos=0.05, max_iter=200)
+
+
+def main(seed: int, sd_deg: float, actions: int) -> None:
+    rec, model, motion, settle = spring_row_recording(seed, actions)
     f, j = model.finger_index("thumb"), model.joint_index("distal")
     p = len(SPRINGS)
     rng = np.random.default_rng(0)

@@ -18,14 +18,12 @@ actions open loop. Its cost is minus twice the filter's likelihood with the turn
 
 import math
 import sys
-from dataclasses import replace
 
 import numpy as np
+from spring_from_perturbed_states import spring_row_recording  # docs/scripts, beside this
 
-from sim.gap import GapSettings, record_actions
 from sim.gap_fit import likelihood_cost
-from vlr.kinematics import HandModel
-from vlr.motion import MotionConfig, MotionModel, ObjectParams, ParticleState
+from vlr.motion import ParticleState
 from vlr.observation import ObservationModel
 
 SPRINGS = np.linspace(0.039, 0.057, 13)  # N m/rad
@@ -33,12 +31,7 @@ OFFSETS = np.array([-2.0, -1.0, -0.5, 0.0, 0.5, 1.0, 1.5, 2.0, 3.0])  # degrees 
 
 
 def main(seed: int, actions: int) -> None:
-    rec = record_actions(GapSettings(object="toy_block", hand="modelo_thumb45", seed=seed,
-                                     actions=actions, ramp_time=0.1))
-    model = HandModel.from_spec(rec.hand_spec)
-    cfg = replace(MotionConfig().with_rolling(True), limit_stiffness=17.0)  # the filter's
-    motion = MotionModel(model, ObjectParams.from_spec(rec.object_spec), cfg)
-    settle = replace(cfg, jump_theta=1.0, jump_pos=0.05, max_iter=200)
+    rec, model, motion, settle = spring_row_recording(seed, actions)
     obs = ObservationModel(sigma_pos=0.2e-3, sigma_rot=math.radians(0.4),
                            sigma_turn=math.radians(1.0), opposed=model.finger_index("thumb"))
     f, j = model.finger_index("thumb"), model.joint_index("distal")
@@ -50,16 +43,16 @@ def main(seed: int, actions: int) -> None:
     st.stiffness[:, f, j] = np.tile(SPRINGS, n_a)
     st.anchor_to_pose(model)
     motion.solve(st, rec.commands[0], settle)
-    dd = d.ravel() / np.linalg.norm(d)
-    along = np.degrees((st.theta - theta0).reshape(len(st.theta), -1) @ dd) / np.sqrt(
-        d.size) / np.degrees(np.radians(1.0))
+    # Each candidate's settled offset along d, in the units of a (degrees along d).
+    along = (st.theta - theta0).reshape(len(st.theta), -1) @ d.ravel() / (d.ravel() @ d.ravel())
     cost = np.zeros(n_a * n_k)
     for k in range(1, len(rec.commands)):
         pa, ra = st.pos.copy(), st.rot.copy()
         motion.solve(st, rec.commands[k], u_from=rec.commands[k - 1])
         cost += likelihood_cost(st, pa, ra, rec.truths[k - 1], rec.truths[k], obs)
     cost = np.where(st.valid, cost, np.nan).reshape(n_a, n_k)
-    ref = cost[list(OFFSETS).index(0.0), list(np.round(SPRINGS, 4)).index(0.045)]
+    k_true = float(rec.truths[0].stiffness[f, j])
+    ref = cost[int(np.argmin(np.abs(OFFSETS))), int(np.argmin(np.abs(SPRINGS - k_true)))]
     print(f"seed {seed}, {len(rec.commands) - 1} actions; cost minus the truth's "
           f"({ref:.1f}); rows: joints moved a degrees along d, settled offset in brackets")
     print("a [deg]       " + " ".join(f"{k:7.4f}" for k in SPRINGS) + "   best")
