@@ -61,6 +61,18 @@ hierarchical noise scale). The filter then identifies the size of the model's er
 the rest of the particle: the posterior over s follows the residuals of the particles that
 fit. A bias the other unknowns can absorb leaves small residuals and so is not seen by s;
 that is the risk of a narrower likelihood, and why the trials measure coverage.
+
+Heavy tails (session 38): `vlr gap`'s per-action errors are heavy-tailed (its medians a half to
+a third of its means: a few actions that slip or roll where the model sticks carry most of
+it), and a Gaussian wide enough for those is wider than the typical action needs. With
+`dof` nu > 0 the pose's term is a multivariate Student t with the same scale matrix
+(Sigma, or s^2 Sigma with the noise unknown),
+
+    log p = -(nu + 6) / 2 log(1 + q / nu) + (the normalisations above),  q = e^T Sigma^-1 e,
+
+the marginal of a Gaussian whose precision is Gamma(nu/2, nu/2)-distributed afresh on every
+observation: an action the model gets badly wrong costs a particle log q, not q. nu -> inf
+is the Gaussian; 0 keeps it.
 """
 
 from __future__ import annotations
@@ -169,6 +181,8 @@ class ObservationModel:
             axis.
         sigma_tension: s_T, the scale of each tendon tension's error [N] (module docstring);
             0 = tensions not weighed.
+        dof: nu, the pose error's Student-t degrees of freedom (module docstring, "Heavy
+            tails"); 0 = Gaussian.
     """
 
     sigma_pos: float = 0.5e-3
@@ -177,6 +191,7 @@ class ObservationModel:
     sigma_turn: float = 0.0
     opposed: int = 0
     sigma_tension: float = 0.0
+    dof: float = 0.0
 
     def __post_init__(self) -> None:
         for name in ("sigma_pos", "sigma_rot"):
@@ -188,6 +203,8 @@ class ObservationModel:
             raise ValueError(f"sigma_turn {self.sigma_turn!r} must be >= 0")
         if not (np.isfinite(self.sigma_tension) and self.sigma_tension >= 0):
             raise ValueError(f"sigma_tension {self.sigma_tension!r} must be >= 0")
+        if not (np.isfinite(self.dof) and self.dof >= 0):
+            raise ValueError(f"dof {self.dof!r} must be >= 0 (0: Gaussian)")
         if self.sigma_turn > 0 and self.motion_fraction > 0:
             raise ValueError("sigma_turn and motion_fraction are two models of the same "
                              "error: set one")
@@ -219,15 +236,22 @@ class ObservationModel:
         quad, log_norm = self._pose_terms(state, obs, motion)
         noise = getattr(state, "noise", None)
         if noise is None:
-            ll = -0.5 * quad + log_norm
+            ll = self._kernel(quad) + log_norm
         else:
             s = np.asarray(noise, dtype=float)
-            ll = -0.5 * quad / (s * s) + log_norm - POSE_DIMS * np.log(s)
+            ll = self._kernel(quad / (s * s)) + log_norm - POSE_DIMS * np.log(s)
         observed = getattr(obs, "tensions", None)
         if self.sigma_tension > 0 and tensions is not None and observed is not None:
             r = (np.asarray(tensions) - np.asarray(observed)[None, :]) / self.sigma_tension
             ll = ll - 0.5 * (r * r).sum(axis=-1)
         return np.where(state.valid & np.isfinite(ll), ll, -np.inf)
+
+    def _kernel(self, quad: np.ndarray) -> np.ndarray:
+        """The pose term's log density in its Mahalanobis square q: -q / 2 (Gaussian) or
+        -(nu + 6) / 2 log(1 + q / nu) (Student t; module docstring, "Heavy tails")."""
+        if self.dof > 0:
+            return -0.5 * (self.dof + POSE_DIMS) * np.log1p(quad / self.dof)
+        return -0.5 * quad
 
     def _pose_terms(self, state: ParticleState, obs: PoseObservation,
                     motion: tuple[np.ndarray, np.ndarray] | None

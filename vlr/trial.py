@@ -140,6 +140,8 @@ class TrialSettings:
             (`turn_deg`): `ROLLING_TURN_SIGMA`'s turn with rolling contacts when neither base
             scale nor sigma_motion is given and the hand has a thumb, else none; so scales
             given alone keep the meaning they had before the turn term.
+        likelihood_dof: nu, the pose error's Student-t degrees of freedom
+            (`vlr.observation.ObservationModel.dof`, "Heavy tails"); 0 = Gaussian.
         sigma_tension_n: weigh the hand's tendon tensions in the likelihood with this scale
             [N] (`vlr.observation`, s_T); 0 = not weighed. The sim reports them; the real
             hand when its config has a `tension` calibration (hardware/README.md).
@@ -245,6 +247,7 @@ class TrialSettings:
     sigma_rot_deg: float | None = None
     sigma_motion: float = 0.0
     sigma_turn_deg: float | None = None
+    likelihood_dof: float = 0.0
     sigma_tension_n: float = 0.0
     tension_noise_n: float = 0.0
     nominal_theta_deg: tuple[float, ...] | None = None
@@ -301,6 +304,9 @@ class TrialSettings:
         if self.sigma_turn_deg is not None and not (math.isfinite(self.sigma_turn_deg)
                                                     and self.sigma_turn_deg >= 0):
             raise UserError(f"sigma_turn_deg {self.sigma_turn_deg} must be >= 0")
+        if not (math.isfinite(self.likelihood_dof) and self.likelihood_dof >= 0):
+            raise UserError(f"likelihood_dof {self.likelihood_dof} must be >= 0 "
+                            "(0: a Gaussian likelihood)")
         if not (math.isfinite(self.sigma_tension_n) and self.sigma_tension_n >= 0):
             raise UserError(f"sigma_tension_n {self.sigma_tension_n} must be >= 0")
         if self.sigma_tension_n and self.backend == "synthetic":
@@ -400,7 +406,7 @@ class TrialSettings:
                 raise bad(name, "an integer")
         for name in ("sigma_pos_mm", "sigma_rot_deg", "prior_spread_deg", "contact_spread_deg",
                      "sigma_motion",
-                     "sigma_turn_deg", "sigma_tension_n", "tension_noise_n",
+                     "sigma_turn_deg", "likelihood_dof", "sigma_tension_n", "tension_noise_n",
                      "slide_friction", "spin_friction", "active_model_error",
                      "active_min_force_n",
                      "contact_stiffness", "limit_stiffness", "ramp_time", "cone_return",
@@ -810,6 +816,7 @@ def identify_config(settings: TrialSettings, model):
                                                      sigma_rot=float(np.radians(sr)),
                                                      motion_fraction=settings.sigma_motion,
                                                      sigma_tension=settings.sigma_tension_n,
+                                                     dof=float(settings.likelihood_dof),
                                                      **_turn(settings, model)))
     actions = {}
     if settings.action_range_mm is not None:

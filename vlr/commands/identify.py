@@ -63,6 +63,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "scales then cover what is left (vlr gap's 'rest'). Default: 1.0 in the "
                    "sim with rolling contacts when no scale is given, with base scales 0.2 "
                    "mm / 0.4 deg (vlr.trial.ROLLING_TURN_SIGMA); else none")
+    p.add_argument("--likelihood-dof", type=float, default=0.0, metavar="NU",
+                   help="the pose error's Student-t degrees of freedom: heavy tails, so that "
+                   "an action the model gets badly wrong costs a particle log q, not q "
+                   "(default 0: Gaussian)")
     p.add_argument("--nominal-theta-deg", type=float, nargs="+", metavar="DEG",
                    help="your guess of the grasp's joint angles: one per joint (every finger "
                    "alike), or one per joint of every finger in the hand's order (default: "
@@ -248,7 +252,8 @@ def run(args: argparse.Namespace) -> int:
         true_stiffness=dict(args.true_stiffness), max_iterations=args.max_iterations,
         min_iterations=args.min_iterations, sigma_pos_mm=args.sigma_pos_mm,
         sigma_rot_deg=args.sigma_rot_deg, sigma_motion=args.sigma_motion,
-        sigma_turn_deg=args.sigma_turn, sigma_tension_n=args.sigma_tension,
+        sigma_turn_deg=args.sigma_turn, likelihood_dof=args.likelihood_dof,
+        sigma_tension_n=args.sigma_tension,
         tension_noise_n=args.tension_noise, config=args.config,
         nominal_theta_deg=args.nominal_theta_deg, prior_spread_deg=args.prior_spread_deg,
         contact_spread_deg=args.contact_spread_deg, contact_prior=args.contact_prior,
@@ -364,6 +369,9 @@ def format_table(result, summary: dict, model) -> str:
         lines.append(f"likelihood: {summary['sigma'][0]:g} mm / {summary['sigma'][1]:g} deg"
                      + (f" + a {turn:g} deg turn in the grip" if turn else ""))
         settings = summary.get("settings", {})
+        if settings.get("likelihood_dof"):
+            lines.append(f"pose errors: Student t, {settings['likelihood_dof']:g} degrees of "
+                         "freedom")
         if settings.get("sigma_tension_n"):
             noise = settings.get("tension_noise_n") or 0.0
             lines.append(f"tensions weighed at {settings['sigma_tension_n']:g} N"
