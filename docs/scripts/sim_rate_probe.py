@@ -12,7 +12,8 @@ quasi-static model's gap at the one ramp or the other. `--hold S` also lets the 
 outcome stand S more seconds at its command (the sim's creep after its settle).
 
     MUJOCO_GL=egl python docs/scripts/sim_rate_probe.py apple 0 [--actions 30]
-        [--reference 0.1] [--ramps 0.05 0.5 2.0] [--hold 4] [--noslip 10] [--json FILE]
+        [--reference 0.1] [--ramps 0.05 0.5 2.0] [--hold 4] [--noslip 10] [--timestep 0.001]
+        [--json FILE]
 """
 
 import argparse
@@ -46,7 +47,9 @@ def probe(obj: str, seed: int, actions: int, reference: float, ramps: list[float
     """Per action and per comparison: (position ratio, orientation ratio) to the reference;
     and per action the reference motion (position [mm], orientation [deg])."""
     s = GapSettings(object=obj, seed=seed, actions=actions)
-    options = SimOptions(width=64, height=48, ramp_time=reference)
+    # The settle's quiet window is counted in steps: keep it 30 ms whatever the step.
+    window = max(1, round(SimOptions.settle_window * 0.001 / sim_model.TIMESTEP))
+    options = SimOptions(width=64, height=48, ramp_time=reference, settle_window=window)
     out: dict[str, list[tuple[float, float]]] = {f"ramp {r:g} s": [] for r in ramps}
     if hold > 0:
         out[f"hold {hold:g} s"] = []
@@ -104,18 +107,24 @@ def main() -> None:
     ap.add_argument("--ramps", type=float, nargs="+", default=[0.05, 0.5, 2.0])
     ap.add_argument("--hold", type=float, default=4.0)
     ap.add_argument("--noslip", type=int, default=sim_model.NOSLIP_ITERATIONS)
+    ap.add_argument("--timestep", type=float, default=sim_model.TIMESTEP,
+                    help="the sim's step [s] (sim.model.TIMESTEP)")
     ap.add_argument("--json", type=Path, default=None,
                     help="write the per-action motion and ratios here")
     args = ap.parse_args()
     for r in [args.reference, *args.ramps]:
         if not r > 0:
             ap.error(f"ramp time {r}: must be > 0 s")
+    if not 0 < args.timestep <= 0.002:
+        ap.error(f"--timestep {args.timestep}: must be in (0, 0.002] s (solref 4 ms)")
     sim_model.NOSLIP_ITERATIONS = args.noslip          # read when the scene is built
+    sim_model.TIMESTEP = args.timestep
     out, motion = probe(args.object, args.seed, args.actions, args.reference, args.ramps,
                         args.hold)
     print(f"{args.object} {args.seed}, reference ramp {args.reference:g} s, noslip "
-          f"{args.noslip}: the sim's own outcome against the reference's, over its motion "
-          "(mean / median over the actions, position | orientation)")
+          f"{args.noslip}, step {args.timestep * 1e3:g} ms: the sim's own outcome against the "
+          "reference's, over its motion (mean / median over the actions, position | "
+          "orientation)")
     for name, rows in out.items():
         r = np.array(rows)
         print(f"  {name:12s} {r[:, 0].mean():.3f} / {np.median(r[:, 0]):.3f} | "
@@ -128,6 +137,7 @@ def main() -> None:
         tmp = args.json.with_suffix(args.json.suffix + ".tmp")
         tmp.write_text(json.dumps({"object": args.object, "seed": args.seed,
                                    "reference_ramp": args.reference, "noslip": args.noslip,
+                                   "timestep": args.timestep,
                                    "per_action": rows}, indent=1))
         tmp.replace(args.json)
 
