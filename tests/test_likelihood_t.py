@@ -1,11 +1,13 @@
 """The Student-t pose likelihood (`vlr.observation`, "Heavy tails"; `ObservationModel.dof`).
 Checked here: with the turn term it is the multivariate t of the same scale matrix (SciPy's
 density, up to one constant shared by all particles), a large nu gives back the Gaussian,
-an outlying particle loses less to a good one than under the Gaussian, and a bad nu names
-itself."""
+an outlying particle loses less to a good one than under the Gaussian, a frame far from
+every particle leaves the weights spread where the Gaussian piles them on a few, and a bad
+nu names itself."""
 
 import numpy as np
 import pytest
+from scipy.spatial.transform import Rotation
 from scipy.stats import multivariate_t
 
 from tests.test_noise_scale import _obs, _particles
@@ -54,3 +56,20 @@ def test_a_bad_nu_is_named():
         ObservationModel(dof=-1.0)
     with pytest.raises(UserError, match="likelihood_dof inf"):
         TrialSettings(backend="sim", likelihood_dof=float("inf"))
+
+
+def test_an_outlying_frame_does_not_collapse_the_particle_set():
+    """A frame far from every particle (a misdetected tag, say): under the Gaussian its
+    weights pile on the few particles nearest to it, under the t they stay spread."""
+    rng, n = np.random.default_rng(1), 2000
+    st = _particles(n=n, seed=1)
+    st.pos = rng.normal(size=(n, 3)) * SIGMA["sigma_pos"]
+    st.rot = Rotation.from_rotvec(rng.normal(size=(n, 3)) * SIGMA["sigma_rot"]).as_matrix()
+    outlier = PomObservation(np.array([20 * SIGMA["sigma_pos"], 0.0, 0.0]), np.eye(3))
+
+    def ess_share(dof: float) -> float:
+        ll = ObservationModel(**SIGMA, dof=dof).log_likelihood(st, outlier)
+        w = np.exp(ll - ll.max())
+        return float(w.sum() ** 2 / (w * w).sum() / n)
+
+    assert ess_share(0.0) < 0.01 and ess_share(4.0) > 0.3
