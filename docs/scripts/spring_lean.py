@@ -90,7 +90,8 @@ def main() -> None:
     p.add_argument("paths", nargs="+", type=Path, help="table CSVs or sweep folders")
     p.add_argument("--joint", default="right.1", help="the joint of the near-stop split")
     p.add_argument("--near", type=float, default=3.5, help="near the stop: truth below [deg]")
-    p.add_argument("--exclude", nargs="*", default=[], help="skip cases naming any of these")
+    p.add_argument("--exclude", nargs="+", action="extend", default=[],
+                   help="skip cases naming any of these (repeatable)")
     args = p.parse_args()
     tables = [x for x in args.paths if x.is_file()]
     folders = [x for x in args.paths if x.is_dir()]
