@@ -18,6 +18,9 @@ from pathlib import Path
 
 import numpy as np
 
+from vlr.errors import UserError
+from vlr.sweep import parse_seeds
+
 OBJECTS = ("apple", "wine glass", "gelatin box", "flat screwdriver")
 
 
@@ -29,17 +32,18 @@ def _setting(case: str) -> str | None:
     return None
 
 
-def _seeds(text: str) -> set[int]:
-    lo, _, hi = text.partition("-")
-    return set(range(int(lo), int(hi or lo) + 1))
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("tables", type=Path, nargs="+")
     ap.add_argument("--seeds", default=None, help="keep these seeds only, e.g. 0-4")
     args = ap.parse_args()
-    keep = None if args.seeds is None else _seeds(args.seeds)
+    try:
+        keep = None if args.seeds is None else set(parse_seeds(args.seeds))
+    except UserError as e:
+        ap.error(str(e))
+    missing = [str(p) for p in args.tables if not p.is_file()]
+    if missing:
+        ap.error(f"no such table: {', '.join(missing)}")
     groups: dict[tuple[str, str], list[dict]] = {}
     for path in args.tables:
         for r in csv.DictReader(path.open()):

@@ -9,11 +9,17 @@ receives is, with probability RATE, tilted by FLIP degrees about a random axis i
 plane through its centre (its own random stream, seeded by the trial's seed); the trial is
 otherwise `vlr identify`'s (the sim's defaults, the trial settings below). Per trial it
 prints the posterior median's proximal error, strict coverage and the mean 95% joint
-interval after 15 actions, and appends a row to `--csv`.
+interval after 15 actions, and appends a row to `--csv`. `--summarize` prints the arms'
+means, split by whether the grasp's frame was tilted, beside untilted baselines.
 
     MUJOCO_GL=egl python docs/scripts/outlier_frames.py --objects apple,wine_glass \
         --seeds 0-4 --rate 0.1 --flip 5 [--dof 4 --scale 1.581] [--csv FILE]
-    python docs/scripts/outlier_frames.py --summarize docs/results/outlier-frames.csv
+    python docs/scripts/outlier_frames.py --summarize docs/results/outlier-frames.csv \
+        --baseline docs/results/sim-scales-075.csv \
+        --baseline "docs/results/likelihood-t-core.csv#t4 core"
+
+Rows are appended to `--csv` one trial at a time, so an interrupted run keeps the trials it
+finished (a file of other columns is refused).
 """
 
 import argparse
@@ -79,13 +85,35 @@ def run(obj: str, seed: int, args) -> dict:
             "ci_deg_at_15": ci[15] if len(ci) > 15 else float("nan")}
 
 
-def summarize(paths: list[Path]) -> None:
+KNOWN = ("apple", "wine glass", "gelatin box", "flat screwdriver")
+
+
+def _baseline(spec: str) -> tuple[str, list[dict]]:
+    """`TABLE#SETTING`: a sweep table's known-hand rows of one setting (the case name after
+    its object: "" for the plain object, e.g. "t4 core"), untilted runs to compare with."""
+    path, _, setting = spec.partition("#")
+    names = {o if not setting else f"{o}, {setting}" for o in KNOWN}
+    rows = [r for r in csv.DictReader(Path(path).open())
+            if r["case"] in names and not r.get("true_hand") and r["status"] == "ok"]
+    if not rows:
+        raise SystemExit(f"--baseline {spec!r}: no known-hand rows of that setting")
+    return spec, rows
+
+
+def summarize(paths: list[Path], baselines: list[str]) -> None:
     """Per arm (nu, scale, flip): the mean over trials, all of them, those whose grasp frame
-    (the one the prior is drawn about) was clean, and those whose grasp frame was tilted."""
+    (the one the prior is drawn about) was clean, and those whose grasp frame was tilted;
+    beside each, the baselines' untilted means over the same seeds."""
     rows = [r for p in paths for r in csv.DictReader(p.open())]
+    bases = [_baseline(b) for b in baselines]
     arms = dict.fromkeys((r["dof"], r["scale"], r["flip_deg"], r["rate"]) for r in rows)
     print("nu, scale, flip [deg], rate | trials | proximal, median [deg] | coverage strict / "
-          "within 0.1 deg | 95% interval after 15 [deg]")
+          "within 0.1 deg | 95% interval after 15 [deg] | untilted, same seeds: proximal, "
+          "strict coverage")
+
+    def mean(key: str, sel: list[dict]) -> float:
+        return float(np.nanmean([float(r[key]) for r in sel]))
+
     for arm in arms:
         group = [r for r in rows if (r["dof"], r["scale"], r["flip_deg"], r["rate"]) == arm]
         first = [r for r in group if "0" in r["tilted_frames"].split(";")]
@@ -94,11 +122,14 @@ def summarize(paths: list[Path]) -> None:
                           ("grasp frame tilted", first)):
             if not sel:
                 continue
-            def col(key: str, sel: list[dict] = sel) -> float:
-                return float(np.nanmean([float(r[key]) for r in sel]))
-            print(f"{', '.join(arm)} {name} | {len(sel)} | {col('proximal_deg_median'):.2f} | "
-                  f"{col('coverage'):.2f} / {col('coverage_tolerant'):.2f} | "
-                  f"{col('ci_deg_at_15'):.2f}")
+            seeds = {r["seed"] for r in sel}
+            untilted = "; ".join(
+                f"{spec}: {mean('proximal_deg_median', b):.2f}, {mean('coverage', b):.2f}"
+                for spec, base in bases if (b := [r for r in base if r["seed"] in seeds]))
+            print(f"{', '.join(arm)} {name} | {len(sel)} | "
+                  f"{mean('proximal_deg_median', sel):.2f} | {mean('coverage', sel):.2f} / "
+                  f"{mean('coverage_tolerant', sel):.2f} | {mean('ci_deg_at_15', sel):.2f} | "
+                  f"{untilted}")
 
 
 def main() -> None:
@@ -113,9 +144,12 @@ def main() -> None:
     ap.add_argument("--csv", type=Path, default=None)
     ap.add_argument("--summarize", type=Path, nargs="+", default=None, metavar="CSV",
                     help="print the arms' means from these CSVs and stop")
+    ap.add_argument("--baseline", action="append", default=[], metavar="TABLE#SETTING",
+                    help="with --summarize: a sweep table's untilted known-hand runs of one "
+                    "setting to print beside each arm (e.g. docs/results/sim-scales-075.csv)")
     args = ap.parse_args()
     if args.summarize:
-        summarize(args.summarize)
+        summarize(args.summarize, args.baseline)
         return
     if not 0 <= args.rate <= 1:
         ap.error(f"--rate {args.rate}: a share of frames must be in [0, 1]")
@@ -128,6 +162,12 @@ def main() -> None:
                            for k, v in row.items()), flush=True)
             if args.csv is not None:
                 new = not args.csv.exists()
+                if not new:
+                    with args.csv.open() as f:
+                        header = next(csv.reader(f), [])
+                    if header != list(row):
+                        raise SystemExit(f"--csv {args.csv}: its columns are not this "
+                                         "script's; choose another file")
                 with args.csv.open("a", newline="") as f:
                     w = csv.DictWriter(f, fieldnames=list(row))
                     if new:
