@@ -21,6 +21,7 @@ from dataclasses import replace
 import numpy as np
 
 from sim.gap import _ALL, GapSettings, _start, record_actions
+from vlr.errors import UserError
 from vlr.kinematics import HandModel
 from vlr.motion import MotionConfig, MotionModel, ObjectParams
 from vlr.sweep import parse_seeds
@@ -55,10 +56,14 @@ def main() -> None:
     ap.add_argument("--actions", type=int, default=20)
     ap.add_argument("--at", type=int, nargs="+", default=[5, 10, 20])
     args = ap.parse_args()
+    try:
+        seeds = parse_seeds(args.seeds)
+    except UserError as e:
+        ap.error(str(e))
     if any(not 1 <= a <= args.actions for a in args.at):
         ap.error(f"--at {args.at}: each must be in [1, --actions {args.actions}]")
     paths = []
-    for seed in parse_seeds(args.seeds):
+    for seed in seeds:
         names, path = joint_path(args.object, seed, args.actions)
         paths.append(path)
         for a in args.at:

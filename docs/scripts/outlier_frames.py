@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from vlr.errors import UserError
 from vlr.observation import PomObservation
 from vlr.sweep import parse_seeds
 from vlr.trial import TrialSettings, identify_trial
@@ -148,6 +149,10 @@ def main() -> None:
                     help="with --summarize: a sweep table's untilted known-hand runs of one "
                     "setting to print beside each arm (e.g. docs/results/sim-scales-075.csv)")
     args = ap.parse_args()
+    try:
+        seeds = parse_seeds(args.seeds)
+    except UserError as e:
+        ap.error(str(e))
     if args.summarize:
         summarize(args.summarize, args.baseline)
         return
@@ -156,7 +161,7 @@ def main() -> None:
     if not args.scale > 0:
         ap.error(f"--scale {args.scale}: must be > 0")
     for obj in args.objects.split(","):
-        for seed in parse_seeds(args.seeds):
+        for seed in seeds:
             row = run(obj, seed, args)
             print(" ".join(f"{k}={v:.3f}" if isinstance(v, float) else f"{k}={v}"
                            for k, v in row.items()), flush=True)

@@ -112,6 +112,8 @@ def main() -> None:
     ap.add_argument("--json", type=Path, default=None,
                     help="write the per-action motion and ratios here")
     args = ap.parse_args()
+    if args.actions < 1:
+        ap.error(f"--actions {args.actions}: at least one action")
     for r in [args.reference, *args.ramps]:
         if not r > 0:
             ap.error(f"ramp time {r}: must be > 0 s")

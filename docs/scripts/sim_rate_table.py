@@ -45,7 +45,11 @@ def main() -> None:
             ap.error(f"--gap {item!r}: use LABEL=FILE")
         gaps[label] = {}
         for f in file.split(","):
+            if not Path(f).is_file():
+                ap.error(f"--gap {item!r}: no such file {f!r}")
             gaps[label].update(_gap_actions(Path(f)))
+    if not args.probes.is_dir():
+        ap.error(f"--probes {args.probes}: not a folder")
     rows = []
     for probe in sorted(args.probes.glob("*.json")):
         p = json.loads(probe.read_text())
