@@ -237,6 +237,10 @@ def test_contact_stiffness_anneal_stages_link_scaling_and_priors_reach_the_filte
     narrow = identify_config(TrialSettings(backend="synthetic", particles=50, jitter_h=0.1),
                              model).filter
     assert narrow.jitter_h == 0.1
+    assert default.jitter_kernel == "gaussian"
+    assert identify_config(TrialSettings(backend="synthetic", particles=50,
+                                         jitter_kernel="copula"),
+                           model).filter.jitter_kernel == "copula"
     assert default.contact_spread == FilterConfig.contact_spread
     wide = identify_config(TrialSettings(backend="synthetic", particles=50,
                                          contact_spread_deg=35.0), model).filter
@@ -253,6 +257,7 @@ def test_contact_stiffness_anneal_stages_link_scaling_and_priors_reach_the_filte
 (dict(link_scaling="yes"), "link_scaling 'yes'"),
                        (dict(jitter_h=1.0), "jitter_h 1.0"),
                        (dict(jitter_h="wide"), "jitter_h 'wide'"),
+                       (dict(jitter_kernel="box"), "jitter_kernel 'box'"),
                        (dict(contact_stiffness=0.0), "contact_stiffness 0.0"),
                        (dict(contact_stiffness="soft"), "contact_stiffness 'soft'"),
                        (dict(limit_stiffness=-1.0), "limit_stiffness -1.0"),

@@ -24,6 +24,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from vlr.copula import NormalScores
 from vlr.kinematics import HandModel, angles_from_normals, normals_from_angles
 from vlr.motion import MotionConfig, MotionModel, ObjectParams, ParticleState
 from vlr.observation import ObservationModel, PoseObservation, rotation_angle
@@ -352,6 +353,7 @@ def interval_width_deg(theta_samples: np.ndarray) -> float:
 CONTACT_PRIORS = ("pad", "surface")
 # How the scale unknowns are drawn over their priors (`FilterConfig.prior_shape`).
 PRIOR_SHAPES = ("uniform", "log-uniform")
+JITTER_KERNELS = ("gaussian", "copula")
 LOG_PRIOR_KINDS = ("stiffness", "tendon", "mass")
 
 # A prior of which no particle settles at the grasp command is drawn again this many times in
@@ -401,6 +403,11 @@ class FilterConfig:
             coverage of the known hand / unknown stiffness / NH1 went 0.90 / 0.77 / 0.53 at
             0.2, 0.97 / 0.86 / 0.53 at 0.3 and 0.97 / 0.91 / 0.78 at 0.4, at the cost of a
             few more iterations: the wider kernel keeps exploring the contact-angle ridges.
+        jitter_kernel: "gaussian", Liu and West's kernel on the sampled dimensions as they
+            are, which makes every marginal Gaussian over repeated draws (its median drifts
+            to its mean: a joint cut at its open stop drifts off it); or "copula", the same
+            kernel on each dimension's normal scores (`vlr.copula`), which keeps the
+            marginals' shapes (docs/RESULTS.md 5, session 39).
         liu_west_shrink: shrink towards the mean by sqrt(1 - h^2) so jitter keeps variance.
         ci_threshold_deg: convergence when the mean 95% interval width of the joint angles
             falls below this [deg] (METHOD.md 3).
@@ -435,6 +442,7 @@ class FilterConfig:
     unknown_discount: float = 1.0
     ess_fraction: float = 0.1
     jitter_h: float = 0.4
+    jitter_kernel: str = "gaussian"
     liu_west_shrink: bool = True
     ci_threshold_deg: float = 2.0
     motion: MotionConfig = field(default_factory=MotionConfig)
@@ -450,6 +458,9 @@ class FilterConfig:
             raise ValueError(f"unknown_warmup {self.unknown_warmup!r} must be an integer >= 0")
         if not 0.0 < self.unknown_discount <= 1.0:
             raise ValueError(f"unknown_discount {self.unknown_discount!r} must be in (0, 1]")
+        if self.jitter_kernel not in JITTER_KERNELS:
+            raise ValueError(f"jitter_kernel {self.jitter_kernel!r}: expected one of "
+                             f"{JITTER_KERNELS}")
         if self.prior_shape not in PRIOR_SHAPES:
             raise ValueError(f"prior_shape {self.prior_shape!r}: expected one of "
                              f"{PRIOR_SHAPES}")
@@ -507,6 +518,18 @@ class IterationRecord:
     n_invalid: int
     ci_deg: float
     stages: int = 1
+
+
+def _liu_west(x: np.ndarray, a: float, h: float, rng: np.random.Generator) -> np.ndarray:
+    """x' = a x + (1 - a) mean + h L eps, L L^T the covariance of `x` (P, D) (METHOD.md 8.2)."""
+    mean = x.mean(axis=0)
+    cov = np.cov(x, rowvar=False)
+    d = cov.shape[0]
+    scale = np.sqrt(np.maximum(np.diag(cov), 0.0)) + 1e-12
+    corr = cov / np.outer(scale, scale) + 1e-9 * np.eye(d)
+    chol = np.linalg.cholesky(corr) * scale[:, None]
+    eps = rng.standard_normal(x.shape)
+    return a * x + (1.0 - a) * mean + h * eps @ chol.T
 
 
 # --------------------------------------------------------------------------- the filter
@@ -786,19 +809,19 @@ class ParticleFilter:
 
         x' = a x + (1 - a) mean + h L eps, with L L^T the particle covariance and
         a = sqrt(1 - h^2): the kernel adds h^2 of the variance and the shrink removes it.
+        With `jitter_kernel` "copula" the draw is made on each dimension's normal scores
+        (`vlr.copula`), which keeps the marginals' shapes (a joint cut at its stop).
         Returns x' and the rows that moved (None: all; with `jitter_keep_parent` the first
         copy of each resampled parent stays as it was)."""
         cfg = self.config
         h = cfg.jitter_h
-        mean = x.mean(axis=0)
-        cov = np.cov(x, rowvar=False)
-        d = cov.shape[0]
-        scale = np.sqrt(np.maximum(np.diag(cov), 0.0)) + 1e-12
-        corr = cov / np.outer(scale, scale) + 1e-9 * np.eye(d)
-        chol = np.linalg.cholesky(corr) * scale[:, None]
-        eps = self.rng.standard_normal(x.shape)
         a = np.sqrt(1.0 - h * h) if cfg.liu_west_shrink else 1.0
-        x_new = a * x + (1.0 - a) * mean + h * eps @ chol.T
+        if cfg.jitter_kernel == "copula":
+            scores = NormalScores.fit(x)
+            x_new = scores.from_normal(_liu_west(scores.to_normal(x), a, h, self.rng))
+        else:
+            x_new = _liu_west(x, a, h, self.rng)
+        mean = x.mean(axis=0)
         moved = None
         if cfg.jitter_keep_parent and parents is not None:
             # Systematic resampling returns sorted indexes, so copies are contiguous.

@@ -202,6 +202,8 @@ class TrialSettings:
             slide_friction or spin_friction (the friction in the energy already slides).
         jitter_h: the filter's Liu-West bandwidth (`vlr.filter.FilterConfig.jitter_h`);
             None: its default.
+        jitter_kernel: "gaussian" or "copula", the space of the filter's Liu-West draw
+            (`vlr.filter.FilterConfig.jitter_kernel`).
         priors: {unknown spec: [low, high]} the uniform prior of an unknown in its SI unit
             (e.g. {"stiffness:thumb.distal": [0.01, 0.08]} N m/rad); an unknown not named
             keeps its default (`vlr.filter.parse_unknown`). Each must be among `unknowns`.
@@ -272,6 +274,7 @@ class TrialSettings:
     cone_return: float | None = None
     link_scaling: bool = False
     jitter_h: float | None = None
+    jitter_kernel: str = "gaussian"
     noise_prior: tuple[float, float] | None = None
     priors: dict[str, tuple[float, float]] = field(default_factory=dict)
     prior_shape: str = "uniform"
@@ -442,7 +445,7 @@ class TrialSettings:
                     or not prior[0] <= prior[1]):
                 raise UserError(f"priors: {spec!r} {prior!r} must be [low, high] with low <= "
                                 "high, both finite")
-        from vlr.filter import PRIOR_SHAPES
+        from vlr.filter import JITTER_KERNELS, PRIOR_SHAPES
         if self.prior_shape not in PRIOR_SHAPES:
             raise bad("prior_shape", f"one of {', '.join(PRIOR_SHAPES)}")
         if not (is_int(self.unknown_warmup) and self.unknown_warmup >= 0):
@@ -461,6 +464,8 @@ class TrialSettings:
         if self.jitter_h is not None and not (is_real(self.jitter_h)
                                               and 0 <= self.jitter_h < 1):
             raise bad("jitter_h", "a number in [0, 1) (or none: the filter's default)")
+        if self.jitter_kernel not in JITTER_KERNELS:
+            raise bad("jitter_kernel", " or ".join(JITTER_KERNELS))
         for name in ("link_scaling", "spin_memory", "exact_cylinder"):
             if not isinstance(getattr(self, name), bool):
                 raise bad(name, "true or false")
@@ -812,6 +817,7 @@ def identify_config(settings: TrialSettings, model):
                            else {"contact_spread": math.radians(settings.contact_spread_deg)}),
                         **({} if settings.jitter_h is None
                            else {"jitter_h": float(settings.jitter_h)}),
+                        jitter_kernel=settings.jitter_kernel,
                         observation=ObservationModel(sigma_pos=sp * 1e-3,
                                                      sigma_rot=float(np.radians(sr)),
                                                      motion_fraction=settings.sigma_motion,

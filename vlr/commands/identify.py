@@ -162,6 +162,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jitter-h", type=float, default=None, metavar="H",
                    help="the filter's Liu-West bandwidth, in [0, 1) (default 0.4; "
                    "RESULTS.md section 5: narrower converges, confidently wrong)")
+    p.add_argument("--jitter-kernel", choices=("gaussian", "copula"), default="gaussian",
+                   help="where the Liu-West draw is made: the sampled dimensions as they are "
+                   "(gaussian, the default), or each one's normal scores (copula), which keeps "
+                   "a joint's posterior cut at its stop from drifting off it")
     p.add_argument("--link-scaling", action="store_true",
                    help="a link of unknown length weighs as the nominal link scaled to its "
                    "length (default: the nominal weights)")
@@ -269,7 +273,8 @@ def run(args: argparse.Namespace) -> int:
         object_mass=args.object_mass, object_com=args.object_com,
         object_curvature=args.object_curvature,
         ramp_time=args.ramp_time, cone_return=args.cone_return,
-        link_scaling=args.link_scaling, jitter_h=args.jitter_h, noise_prior=args.noise_prior,
+        link_scaling=args.link_scaling, jitter_h=args.jitter_h,
+        jitter_kernel=args.jitter_kernel, noise_prior=args.noise_prior,
         priors=dict(args.prior), prior_shape=args.prior_shape,
         unknown_warmup=args.unknown_warmup, unknown_discount=args.unknown_discount,
         action_range_mm=args.action_range_mm, action_band_mm=args.action_band_mm)
@@ -363,7 +368,9 @@ def format_table(result, summary: dict, model) -> str:
                                      "(--prior-spread-deg) missed the grasp, and the answer "
                                      "leans on it"))
     lines.append(f"filter: {summary['timing']['filter_s_per_iteration_median']:.3f} s per "
-                 "iteration (median)")
+                 "iteration (median)"
+                 + (", the jitter drawn on normal scores (copula)"
+                    if summary.get("settings", {}).get("jitter_kernel") == "copula" else ""))
     if summary.get("sigma"):
         turn = summary.get("sigma_turn_deg") or 0.0
         lines.append(f"likelihood: {summary['sigma'][0]:g} mm / {summary['sigma'][1]:g} deg"

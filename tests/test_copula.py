@@ -1,0 +1,104 @@
+"""Normal scores (`vlr.copula`) and the filter's Liu-West draw on them (`jitter_kernel`)."""
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from vlr.copula import NormalScores, silverman_bandwidth
+from vlr.filter import FilterConfig, ParticleFilter
+from vlr.kinematics import HandModel
+from vlr.motion import ObjectParams
+from vlr.spec import load_hand
+
+
+@pytest.fixture(scope="module")
+def modelo() -> HandModel:
+    return HandModel.from_spec(load_hand("modelo"))
+
+
+def _sample(n: int = 20_000, seed: int = 0) -> np.ndarray:
+    """A Gaussian, a half-normal (a joint cut at its stop at 0), a constant; resampled, so
+    that most rows have copies, as after the filter's resampling."""
+    rng = np.random.default_rng(seed)
+    x = np.column_stack([rng.normal(1.0, 2.0, n), np.abs(rng.normal(0.0, 1.0, n)),
+                         np.full(n, 0.3)])
+    return x[rng.integers(0, n, n)]
+
+
+def test_scores_go_back_to_the_values():
+    x = _sample()
+    scores = NormalScores.fit(x)
+    np.testing.assert_allclose(scores.from_normal(scores.to_normal(x)), x, atol=1e-9)
+
+
+def test_a_gaussian_column_scores_as_its_standardized_values():
+    x = _sample()
+    z = NormalScores.fit(x).to_normal(x)
+    assert np.corrcoef(z[:, 0], x[:, 0])[0, 1] > 0.999
+    assert abs(z[:, 0].mean()) < 0.02 and abs(z[:, 0].std() - 1.0) < 0.02
+    # The half-normal's scores are near Gaussian (the CDF's smoothing leaves a little mass
+    # below the cut, so its lowest scores are not as extreme as a Gaussian's: skew 0.2).
+    assert stats.skew(x[:, 1]) > 0.9
+    assert abs(stats.skew(z[:, 1])) < 0.25 * stats.skew(x[:, 1])
+
+
+def test_a_constant_column_stays_constant():
+    x = _sample()
+    scores = NormalScores.fit(x)
+    assert scores.constant.tolist() == [False, False, True]
+    z = scores.to_normal(x)
+    assert np.all(z[:, 2] == 0.0)
+    assert np.all(scores.from_normal(z + 1.0)[:, 2] == 0.3)
+
+
+def test_silverman_bandwidth():
+    x = np.random.default_rng(1).normal(0.0, 2.0, (10_000, 1))
+    assert silverman_bandwidth(x)[0] == pytest.approx(0.9 * 2.0 * 10_000 ** -0.2, rel=0.05)
+
+
+def test_fit_names_a_bad_array():
+    with pytest.raises(ValueError, match=r"\(P >= 2, D\)"):
+        NormalScores.fit(np.zeros(5))
+
+
+def _draws(modelo, kernel: str, steps: int, x: np.ndarray, cut: int | None = 1) -> np.ndarray:
+    """`steps` of the filter's kernel on `x`, each followed by the stop at 0 holding the
+    column `cut` (as the settle does), with no likelihood between them."""
+    pf = ParticleFilter(modelo, ObjectParams(mass=0.1, com=(0.0, 0.0, 0.0)),
+                        FilterConfig(n_particles=len(x), seed=3, jitter_kernel=kernel))
+    for _ in range(steps):
+        x, _ = pf._kernel(x)
+        if cut is not None:
+            x[:, cut] = np.maximum(x[:, cut], 0.0)
+    return x
+
+
+def test_the_copula_kernel_keeps_a_cut_marginal_where_the_gaussian_moves_it(modelo):
+    """The Gaussian kernel makes the half-normal Gaussian over repeated draws: its median
+    moves towards its mean (0.80) and past it with the stop's clipping (0.68 -> 0.83); on normal
+    scores the median stays. Both keep the Gaussian column's mean and spread."""
+    x = _sample()
+    med0 = np.median(x[:, 1])
+    gauss = _draws(modelo, "gaussian", 10, x.copy())
+    copula = _draws(modelo, "copula", 10, x.copy())
+    moved_gauss = np.median(gauss[:, 1]) - med0
+    moved_copula = np.median(copula[:, 1]) - med0
+    assert moved_gauss > 0.12
+    assert abs(moved_copula) < 0.35 * moved_gauss
+    for y in (gauss, copula):
+        assert y[:, 0].mean() == pytest.approx(1.0, abs=0.1)
+        assert y[:, 0].std() == pytest.approx(2.0, rel=0.15)
+        assert np.all(y[:, 2] == pytest.approx(0.3, abs=1e-6))
+
+
+def test_the_copula_kernel_keeps_correlations(modelo):
+    rng = np.random.default_rng(4)
+    a = rng.normal(size=20_000)
+    x = np.column_stack([a, 0.8 * a + 0.6 * rng.normal(size=20_000)])
+    y = _draws(modelo, "copula", 5, x, cut=None)
+    assert np.corrcoef(y[:, 0], y[:, 1])[0, 1] == pytest.approx(0.8, abs=0.05)
+
+
+def test_a_bad_jitter_kernel_is_named():
+    with pytest.raises(ValueError, match="jitter_kernel 'box'"):
+        FilterConfig(jitter_kernel="box")
