@@ -102,3 +102,22 @@ def test_the_copula_kernel_keeps_correlations(modelo):
 def test_a_bad_jitter_kernel_is_named():
     with pytest.raises(ValueError, match="jitter_kernel 'box'"):
         FilterConfig(jitter_kernel="box")
+
+
+def test_identify_takes_the_copula_kernel(tmp_path, capsys):
+    """`vlr identify --jitter-kernel copula` runs the filter with it and says so; a kernel
+    it does not know is one clear line."""
+    import json
+
+    from vlr.cli import main
+
+    rc = main(["identify", "--backend", "synthetic", "--particles", "300", "--max-iterations",
+               "3", "--jitter-kernel", "copula", "--out", str(tmp_path)])
+    assert rc == 0
+    assert "normal scores (copula)" in capsys.readouterr().out
+    result = json.loads((tmp_path / "result.json").read_text())
+    assert result["settings"]["jitter_kernel"] == "copula"
+    with pytest.raises(SystemExit):
+        main(["identify", "--backend", "synthetic", "--jitter-kernel", "box", "--out",
+              str(tmp_path / "bad")])
+    assert "invalid choice: 'box'" in capsys.readouterr().err
