@@ -121,3 +121,25 @@ def test_identify_takes_the_copula_kernel(tmp_path, capsys):
         main(["identify", "--backend", "synthetic", "--jitter-kernel", "box", "--out",
               str(tmp_path / "bad")])
     assert "invalid choice: 'box'" in capsys.readouterr().err
+
+
+def test_copula_joints_draws_the_joints_on_scores_and_the_rest_on_values(modelo):
+    """"copula-joints": a joint column cut at its stop keeps its median, as with "copula";
+    a skewed column past the joints (a contact or unknown) is drawn on its values, so its
+    median moves to its mean, as with "gaussian"."""
+    rng = np.random.default_rng(5)
+    n = 20_000
+    n_th = modelo.n_fingers * modelo.n_joints
+    x = rng.normal(size=(n, n_th + 1))
+    x[:, 0] = np.abs(x[:, 0])           # a joint cut at its stop
+    x[:, -1] = np.abs(x[:, -1])         # an unknown of the same shape
+    x = x[rng.integers(0, n, n)]
+    y = x.copy()
+    pf = ParticleFilter(modelo, ObjectParams(mass=0.1, com=(0.0, 0.0, 0.0)),
+                        FilterConfig(n_particles=n, seed=3, jitter_kernel="copula-joints"))
+    for _ in range(10):
+        y, _ = pf._kernel(y)
+        y[:, 0] = np.maximum(y[:, 0], 0.0)
+    med0 = np.median(x[:, 0])
+    assert abs(np.median(y[:, 0]) - med0) < 0.05
+    assert np.median(y[:, -1]) - np.median(x[:, -1]) > 0.08

@@ -353,7 +353,7 @@ def interval_width_deg(theta_samples: np.ndarray) -> float:
 CONTACT_PRIORS = ("pad", "surface")
 # How the scale unknowns are drawn over their priors (`FilterConfig.prior_shape`).
 PRIOR_SHAPES = ("uniform", "log-uniform")
-JITTER_KERNELS = ("gaussian", "copula")
+JITTER_KERNELS = ("gaussian", "copula", "copula-joints")
 LOG_PRIOR_KINDS = ("stiffness", "tendon", "mass")
 
 # A prior of which no particle settles at the grasp command is drawn again this many times in
@@ -407,7 +407,8 @@ class FilterConfig:
             are, which makes every marginal Gaussian over repeated draws (its median drifts
             to its mean: a joint cut at its open stop drifts off it); or "copula", the same
             kernel on each dimension's normal scores (`vlr.copula`), which keeps the
-            marginals' shapes (docs/RESULTS.md 5, session 39).
+            marginals' shapes (docs/RESULTS.md 5, session 39); "copula-joints", on the
+            joint angles' scores and the other dimensions' values.
         liu_west_shrink: shrink towards the mean by sqrt(1 - h^2) so jitter keeps variance.
         ci_threshold_deg: convergence when the mean 95% interval width of the joint angles
             falls below this [deg] (METHOD.md 3).
@@ -810,7 +811,8 @@ class ParticleFilter:
         x' = a x + (1 - a) mean + h L eps, with L L^T the particle covariance and
         a = sqrt(1 - h^2): the kernel adds h^2 of the variance and the shrink removes it.
         With `jitter_kernel` "copula" the draw is made on each dimension's normal scores
-        (`vlr.copula`), which keeps the marginals' shapes (a joint cut at its stop).
+        (`vlr.copula`), which keeps the marginals' shapes (a joint cut at its stop);
+        "copula-joints" on the joint angles' scores alone.
         Returns x' and the rows that moved (None: all; with `jitter_keep_parent` the first
         copy of each resampled parent stays as it was)."""
         cfg = self.config
@@ -819,6 +821,14 @@ class ParticleFilter:
         if cfg.jitter_kernel == "copula":
             scores = NormalScores.fit(x)
             x_new = scores.from_normal(_liu_west(scores.to_normal(x), a, h, self.rng))
+        elif cfg.jitter_kernel == "copula-joints":
+            # The joint angles on their scores, the contacts and unknowns as they are.
+            n_th = self.model.n_fingers * self.model.n_joints
+            scores = NormalScores.fit(x[:, :n_th])
+            y = x.copy()
+            y[:, :n_th] = scores.to_normal(x[:, :n_th])
+            x_new = _liu_west(y, a, h, self.rng)
+            x_new[:, :n_th] = scores.from_normal(x_new[:, :n_th])
         else:
             x_new = _liu_west(x, a, h, self.rng)
         mean = x.mean(axis=0)

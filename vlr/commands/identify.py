@@ -162,10 +162,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jitter-h", type=float, default=None, metavar="H",
                    help="the filter's Liu-West bandwidth, in [0, 1) (default 0.4; "
                    "RESULTS.md section 5: narrower converges, confidently wrong)")
-    p.add_argument("--jitter-kernel", choices=("gaussian", "copula"), default="gaussian",
+    p.add_argument("--jitter-kernel", choices=("gaussian", "copula", "copula-joints"),
+                   default="gaussian",
                    help="where the Liu-West draw is made: the sampled dimensions as they are "
                    "(gaussian, the default), or each one's normal scores (copula), which keeps "
-                   "a joint's posterior cut at its stop from drifting off it")
+                   "a joint's posterior cut at its stop from drifting off it, or the joint "
+                   "angles' scores alone (copula-joints)")
     p.add_argument("--link-scaling", action="store_true",
                    help="a link of unknown length weighs as the nominal link scaled to its "
                    "length (default: the nominal weights)")
@@ -369,8 +371,10 @@ def format_table(result, summary: dict, model) -> str:
                                      "leans on it"))
     lines.append(f"filter: {summary['timing']['filter_s_per_iteration_median']:.3f} s per "
                  "iteration (median)"
-                 + (", the jitter drawn on normal scores (copula)"
-                    if summary.get("settings", {}).get("jitter_kernel") == "copula" else ""))
+                 + {"copula": ", the jitter drawn on normal scores (copula)",
+                    "copula-joints": ", the jitter drawn on the joints' normal scores "
+                                     "(copula-joints)"}.get(
+                        summary.get("settings", {}).get("jitter_kernel"), ""))
     if summary.get("sigma"):
         turn = summary.get("sigma_turn_deg") or 0.0
         lines.append(f"likelihood: {summary['sigma'][0]:g} mm / {summary['sigma'][1]:g} deg"
