@@ -5,7 +5,9 @@ towards the set's mean and adds Gaussian noise of the set's covariance: it keeps
 and the covariance, and over repeated draws makes every marginal Gaussian. A joint whose
 posterior is cut at its open stop is skewed (its mean lies further off the stop than its
 median), so repeated draws move its median towards its mean, away from the stop, faster
-than a weak likelihood pulls it back (docs/RESULTS.md 5, session 39). Drawn instead in each
+than a weak likelihood pulls it back; so with an unknown spring's posterior, skewed in the
+first actions (docs/RESULTS.md 5, session 39: that lean kept the spring row over the
+paper's figure). Drawn instead in each
 dimension's normal scores z = Phi^-1(F(x)), with F the dimension's smoothed empirical CDF,
 the same kernel keeps each marginal's shape, and the shrink pulls towards the medians:
 Liu and West's kernel on a Gaussian copula.
@@ -62,7 +64,7 @@ class NormalScores:
         x = np.asarray(x, dtype=float)
         if x.ndim != 2 or len(x) < 2:
             raise ValueError(f"NormalScores.fit needs a (P >= 2, D) array, got {x.shape}")
-        p, d = x.shape
+        d = x.shape[1]
         bw = silverman_bandwidth(x)
         lo, hi = x.min(axis=0), x.max(axis=0)
         constant = ~(bw > 0) | ~(hi > lo)
