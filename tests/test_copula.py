@@ -91,12 +91,31 @@ def test_the_copula_kernel_keeps_a_cut_marginal_where_the_gaussian_moves_it(mode
         assert np.all(y[:, 2] == pytest.approx(0.3, abs=1e-6))
 
 
+def test_forty_draws_keep_the_spread_and_the_cut_marginals_median(modelo):
+    """vlr/copula.py's docstring: over 40 draws with no likelihood and no stop the scores'
+    kernel does not widen a Gaussian marginal (1.980 -> 1.985) and keeps a half-normal's
+    median (0.68 -> 0.69), where the values' kernel moves it to its mean (0.80)."""
+    x = _sample()
+    gauss = _draws(modelo, "gaussian", 40, x.copy(), cut=None)
+    copula = _draws(modelo, "copula", 40, x.copy(), cut=None)
+    assert copula[:, 0].std() == pytest.approx(x[:, 0].std(), rel=0.01)
+    assert abs(np.median(copula[:, 1]) - np.median(x[:, 1])) < 0.03
+    assert np.median(gauss[:, 1]) == pytest.approx(x[:, 1].mean(), abs=0.02)
+
+
 def test_the_copula_kernel_keeps_correlations(modelo):
     rng = np.random.default_rng(4)
     a = rng.normal(size=20_000)
     x = np.column_stack([a, 0.8 * a + 0.6 * rng.normal(size=20_000)])
     y = _draws(modelo, "copula", 5, x, cut=None)
     assert np.corrcoef(y[:, 0], y[:, 1])[0, 1] == pytest.approx(0.8, abs=0.05)
+
+
+def test_the_cli_offers_the_filters_kernels():
+    from vlr import filter as vf
+    from vlr.commands import identify
+
+    assert identify.JITTER_KERNELS == vf.JITTER_KERNELS
 
 
 def test_a_bad_jitter_kernel_is_named():

@@ -16,7 +16,7 @@ F is the CDF of a Gaussian kernel density estimate (Silverman's bandwidth), tabu
 grid, so that resampled duplicates map to distinct scores after the kernel's noise and the
 inverse is an interpolation. The kernel keeps the scores' mean and spread, and the scores
 map back through the same F, so the smoothing does not widen the marginals: measured over
-40 draws with no likelihood (20,000 particles, tests/test_copula.py's sample), a Gaussian
+40 draws with no likelihood (20,000 particles; tests/test_copula.py checks it), a Gaussian
 marginal's sd 1.980 -> 1.985 (the Gaussian kernel's 1.995), a half-normal's median 0.68 ->
 0.69 (the Gaussian kernel's 0.80, its mean), its sd 0.61 -> 0.58 (its scores are a little
 narrower than a Gaussian's at the cut).

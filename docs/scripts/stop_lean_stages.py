@@ -33,7 +33,10 @@ ON_STOP_DEG = 0.25  # a particle within this of the open stop counts as on it
 
 
 def run(sweep: Path, case: str, seed: int, particles: int | None) -> dict:
-    """Run the trial; return every joint's per-iteration rows (`rows` of `joint_rows`)."""
+    """Run the trial; return every joint's per-iteration rows ({"joints": {name: rows}}):
+    the lean (median minus truth) after each stage [deg], the 95% interval above the stop
+    [deg] and the share on the stop, after the jitter. "motion" summarizes the particles
+    whose solve succeeded; the others, every particle."""
     trials = [t for t in expand(load_sweep(sweep)) if t.case == case and t.settings.seed == seed]
     if not trials:
         cases = sorted({t.case for t in expand(load_sweep(sweep))})
@@ -58,14 +61,14 @@ def run(sweep: Path, case: str, seed: int, particles: int | None) -> dict:
             "on_stop": np.mean(after < stop + np.radians(ON_STOP_DEG), axis=0),
         })
 
-    run = identify_trial(settings, watch=watch)
-    m = run.model
+    trial = identify_trial(settings, watch=watch)
+    m = trial.model
     names = [f"{f}.{k}" for f in m.names for k in range(m.n_joints)]
     stop = m.limits[..., 0].ravel()
     joints = {}
     for j, name in enumerate(names):
         rows = []
-        for i, (s, t) in enumerate(zip(stages, run.truths, strict=True)):
+        for i, (s, t) in enumerate(zip(stages, trial.truths, strict=True)):
             truth = float(t.theta.ravel()[j])
             row = {"iteration": i, "truth_deg": float(np.degrees(truth - stop[j])),
                    "on_stop": float(s["on_stop"][j])}
@@ -127,12 +130,20 @@ def main() -> None:
         if args.show is not None:
             if not args.show.is_file():
                 raise UserError(f"--show {args.show}: no such file")
-            show(json.loads(args.show.read_text()), args.joint)
+            try:
+                res = json.loads(args.show.read_text())
+            except json.JSONDecodeError as exc:
+                raise UserError(f"--show {args.show}: not JSON ({exc})") from None
+            if not isinstance(res, dict) or "joints" not in res:
+                raise UserError(f"--show {args.show}: not a file this script wrote")
+            show(res, args.joint)
             return
         if args.sweep is None or args.case is None:
             raise UserError("give a sweep file and --case (or --show FILE)")
         if not args.sweep.is_file():
             raise UserError(f"sweep file {args.sweep}: no such file")
+        if args.json is not None and not args.json.parent.is_dir():
+            raise UserError(f"--json {args.json}: no folder {args.json.parent}")
         res = run(args.sweep, args.case, args.seed, args.particles)
         show(res, args.joint)
     except UserError as exc:

@@ -16,6 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
+# `vlr.filter.JITTER_KERNELS`, spelt out so that the CLI starts without importing the filter
+# (0.6 s); tests/test_copula.py checks that the two agree.
+JITTER_KERNELS = ("gaussian", "copula", "copula-joints")
+
 # Below this share of true joints inside the grasp prior's intervals (scored against the
 # sim's or the synthetic world's truth), the run's table says the guess missed the grasp.
 PRIOR_COVERAGE_WARN = 0.5
@@ -162,8 +166,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jitter-h", type=float, default=None, metavar="H",
                    help="the filter's Liu-West bandwidth, in [0, 1) (default 0.4; "
                    "RESULTS.md section 5: narrower converges, confidently wrong)")
-    p.add_argument("--jitter-kernel", choices=("gaussian", "copula", "copula-joints"),
-                   default="gaussian",
+    p.add_argument("--jitter-kernel", choices=JITTER_KERNELS, default="gaussian",
                    help="where the Liu-West draw is made: the sampled dimensions as they are "
                    "(gaussian, the default), or each one's normal scores (copula), which keeps "
                    "a joint's posterior cut at its stop from drifting off it, or the joint "
