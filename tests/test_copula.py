@@ -162,3 +162,49 @@ def test_copula_joints_draws_the_joints_on_scores_and_the_rest_on_values(modelo)
     med0 = np.median(x[:, 0])
     assert abs(np.median(y[:, 0]) - med0) < 0.05
     assert np.median(y[:, -1]) - np.median(x[:, -1]) > 0.08
+
+
+@pytest.mark.parametrize("kernel, joint_on_scores", [("copula-scales", False),
+                                                     ("copula-joints-scales", True)])
+def test_scale_kernels_draw_a_spring_on_its_scores(modelo, kernel, joint_on_scores):
+    """"copula-scales" draws a scale unknown (a spring) on its normal scores, so its skewed
+    marginal keeps its median, and the joints on their values (their medians drift to the
+    mean); "copula-joints-scales" keeps both."""
+    rng = np.random.default_rng(6)
+    n = 20_000
+    pf = ParticleFilter(modelo, ObjectParams(mass=0.1, com=(0.0, 0.0, 0.0)),
+                        FilterConfig(n_particles=n, seed=3, jitter_kernel=kernel,
+                                     unknowns=("stiffness:thumb.distal",)))
+    n_th = modelo.n_fingers * modelo.n_joints
+    lo, hi = pf.unknowns[0].prior
+    x = rng.normal(size=(n, n_th + 2))
+    x[:, 0] = np.abs(x[:, 0])                           # a joint cut at its stop
+    x[:, -1] = lo + 0.1 * (hi - lo) * (1.0 + np.abs(x[:, -1]))   # a spring skewed up
+    x = x[rng.integers(0, n, n)]
+    y = x.copy()
+    for _ in range(10):
+        y, _ = pf._kernel(y)
+        y[:, 0] = np.maximum(y[:, 0], 0.0)
+    spring_shift = (np.median(y[:, -1]) - np.median(x[:, -1])) / (0.1 * (hi - lo))
+    assert abs(spring_shift) < 0.05
+    joint_shift = np.median(y[:, 0]) - np.median(x[:, 0])
+    assert (abs(joint_shift) < 0.05) if joint_on_scores else (joint_shift > 0.08)
+
+
+def test_the_scores_mask_names_the_columns(modelo):
+    """Which columns each kernel draws on scores: none, all, the joints, the scale unknowns
+    (a spring, not a link length), both."""
+    n_th = modelo.n_fingers * modelo.n_joints
+    unknowns = ("stiffness:thumb.distal", "length:left.proximal")
+    masks = {}
+    for kernel in ("gaussian", "copula", "copula-joints", "copula-scales",
+                   "copula-joints-scales"):
+        pf = ParticleFilter(modelo, ObjectParams(mass=0.1, com=(0.0, 0.0, 0.0)),
+                            FilterConfig(n_particles=10, jitter_kernel=kernel,
+                                         unknowns=unknowns))
+        masks[kernel] = pf._score_columns(np.zeros((4, n_th + 3 + 2)))
+    assert not masks["gaussian"].any() and masks["copula"].all()
+    assert masks["copula-joints"].sum() == n_th and masks["copula-joints"][:n_th].all()
+    assert list(np.flatnonzero(masks["copula-scales"])) == [n_th + 3]
+    assert list(np.flatnonzero(masks["copula-joints-scales"])) == list(range(n_th)) + [n_th + 3]
+

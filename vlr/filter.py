@@ -353,7 +353,8 @@ def interval_width_deg(theta_samples: np.ndarray) -> float:
 CONTACT_PRIORS = ("pad", "surface")
 # How the scale unknowns are drawn over their priors (`FilterConfig.prior_shape`).
 PRIOR_SHAPES = ("uniform", "log-uniform")
-JITTER_KERNELS = ("gaussian", "copula", "copula-joints")
+JITTER_KERNELS = ("gaussian", "copula", "copula-joints", "copula-scales",
+                  "copula-joints-scales")
 LOG_PRIOR_KINDS = ("stiffness", "tendon", "mass")
 
 # A prior of which no particle settles at the grasp command is drawn again this many times in
@@ -408,7 +409,9 @@ class FilterConfig:
             to its mean: a joint cut at its open stop drifts off it); or "copula", the same
             kernel on each dimension's normal scores (`vlr.copula`), which keeps the
             marginals' shapes (docs/RESULTS.md 5, session 39); "copula-joints", on the
-            joint angles' scores and the other dimensions' values.
+            joint angles' scores and the other dimensions' values; "copula-scales", on the
+            scale unknowns' scores (`LOG_PRIOR_KINDS`: positive, their posteriors skewed)
+            and the rest's values; "copula-joints-scales", on both's scores (session 40).
         liu_west_shrink: shrink towards the mean by sqrt(1 - h^2) so jitter keeps variance.
         ci_threshold_deg: convergence when the mean 95% interval width of the joint angles
             falls below this [deg] (METHOD.md 3).
@@ -812,23 +815,21 @@ class ParticleFilter:
         a = sqrt(1 - h^2): the kernel adds h^2 of the variance and the shrink removes it.
         With `jitter_kernel` "copula" the draw is made on each dimension's normal scores
         (`vlr.copula`), which keeps the marginals' shapes (a joint cut at its stop);
-        "copula-joints" on the joint angles' scores alone.
+        "copula-joints" on the joint angles' scores alone, "copula-scales" on the scale
+        unknowns', "copula-joints-scales" on both (`_score_columns`).
         Returns x' and the rows that moved (None: all; with `jitter_keep_parent` the first
         copy of each resampled parent stays as it was)."""
         cfg = self.config
         h = cfg.jitter_h
         a = np.sqrt(1.0 - h * h) if cfg.liu_west_shrink else 1.0
-        if cfg.jitter_kernel == "copula":
-            scores = NormalScores.fit(x)
-            x_new = scores.from_normal(_liu_west(scores.to_normal(x), a, h, self.rng))
-        elif cfg.jitter_kernel == "copula-joints":
-            # The joint angles on their scores, the contacts and unknowns as they are.
-            n_th = self.model.n_fingers * self.model.n_joints
-            scores = NormalScores.fit(x[:, :n_th])
+        on_scores = self._score_columns(x)
+        if on_scores.any():
+            # The chosen columns on their normal scores, the rest as they are.
+            scores = NormalScores.fit(x[:, on_scores])
             y = x.copy()
-            y[:, :n_th] = scores.to_normal(x[:, :n_th])
+            y[:, on_scores] = scores.to_normal(x[:, on_scores])
             x_new = _liu_west(y, a, h, self.rng)
-            x_new[:, :n_th] = scores.from_normal(x_new[:, :n_th])
+            x_new[:, on_scores] = scores.from_normal(x_new[:, on_scores])
         else:
             x_new = _liu_west(x, a, h, self.rng)
         mean = x.mean(axis=0)
@@ -854,6 +855,23 @@ class ParticleFilter:
             col = np.where(col < lo, 2 * lo - col, col)
             x_new[:, base + j] = np.clip(np.where(col > hi, 2 * hi - col, col), lo, hi)
         return x_new, moved
+
+    def _score_columns(self, x: np.ndarray) -> np.ndarray:
+        """Which of the sampled dimensions of `x` (P, D) the Liu-West draw makes on normal
+        scores (`FilterConfig.jitter_kernel`): a boolean mask over the D columns."""
+        kernel = self.config.jitter_kernel
+        n_columns = x.shape[1]
+        mask = np.zeros(n_columns, dtype=bool)
+        if kernel == "copula":
+            mask[:] = True
+            return mask
+        if kernel in ("copula-joints", "copula-joints-scales"):
+            mask[:self.model.n_fingers * self.model.n_joints] = True
+        if kernel in ("copula-scales", "copula-joints-scales"):
+            base = n_columns - len(self.unknowns)
+            for j, u in enumerate(self.unknowns):
+                mask[base + j] = u.kind in LOG_PRIOR_KINDS
+        return mask
 
     def _jitter(self, x: np.ndarray, parents: np.ndarray | None = None) -> np.ndarray | None:
         """Liu-West kernel (`_kernel`) on `self.state` at `self.command`, then re-anchor and

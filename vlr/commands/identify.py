@@ -18,7 +18,8 @@ import numpy as np
 
 # `vlr.filter.JITTER_KERNELS`, spelt out so that the CLI starts without importing the filter
 # (0.6 s); tests/test_copula.py checks that the two agree.
-JITTER_KERNELS = ("gaussian", "copula", "copula-joints")
+JITTER_KERNELS = ("gaussian", "copula", "copula-joints", "copula-scales",
+                  "copula-joints-scales")
 
 # Below this share of true joints inside the grasp prior's intervals (scored against the
 # sim's or the synthetic world's truth), the run's table says the guess missed the grasp.
@@ -169,8 +170,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jitter-kernel", choices=JITTER_KERNELS, default="gaussian",
                    help="where the Liu-West draw is made: the sampled dimensions as they are "
                    "(gaussian, the default), or each one's normal scores (copula), which keeps "
-                   "a joint's posterior cut at its stop from drifting off it, or the joint "
-                   "angles' scores alone (copula-joints)")
+                   "a joint's posterior cut at its stop from drifting off it; or the joint "
+                   "angles' scores alone (copula-joints), the scale unknowns' (a spring, the "
+                   "tendon, the mass: copula-scales), or both (copula-joints-scales)")
     p.add_argument("--link-scaling", action="store_true",
                    help="a link of unknown length weighs as the nominal link scaled to its "
                    "length (default: the nominal weights)")
@@ -376,7 +378,12 @@ def format_table(result, summary: dict, model) -> str:
                  "iteration (median)"
                  + {"copula": ", the jitter drawn on normal scores (copula)",
                     "copula-joints": ", the jitter drawn on the joints' normal scores "
-                                     "(copula-joints)"}.get(
+                                     "(copula-joints)",
+                    "copula-scales": ", the jitter drawn on the scale unknowns' normal "
+                                     "scores (copula-scales)",
+                    "copula-joints-scales": ", the jitter drawn on the joints' and the "
+                                            "scale unknowns' normal scores "
+                                            "(copula-joints-scales)"}.get(
                         summary.get("settings", {}).get("jitter_kernel"), ""))
     if summary.get("sigma"):
         turn = summary.get("sigma_turn_deg") or 0.0
