@@ -208,3 +208,16 @@ def test_the_scores_mask_names_the_columns(modelo):
     assert list(np.flatnonzero(masks["copula-scales"])) == [n_th + 3]
     assert list(np.flatnonzero(masks["copula-joints-scales"])) == list(range(n_th)) + [n_th + 3]
 
+
+def test_copula_scales_without_a_scale_unknown_is_the_default_draw(modelo):
+    """A row without a scale unknown (the known hand, link lengths) draws with
+    "copula-scales" exactly as with "gaussian": same random stream, same numbers."""
+    rng = np.random.default_rng(8)
+    x = rng.normal(size=(500, modelo.n_fingers * modelo.n_joints + 6 + 1))
+    draws = []
+    for kernel in ("gaussian", "copula-scales"):
+        pf = ParticleFilter(modelo, ObjectParams(mass=0.1, com=(0.0, 0.0, 0.0)),
+                            FilterConfig(n_particles=500, seed=4, jitter_kernel=kernel,
+                                         unknowns=("length:left.proximal",)))
+        draws.append(pf._kernel(x.copy())[0])
+    np.testing.assert_array_equal(draws[0], draws[1])
