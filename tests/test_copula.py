@@ -221,3 +221,29 @@ def test_copula_scales_without_a_scale_unknown_is_the_default_draw(modelo):
                                          unknowns=("length:left.proximal",)))
         draws.append(pf._kernel(x.copy())[0])
     np.testing.assert_array_equal(draws[0], draws[1])
+
+
+@pytest.mark.parametrize("kernel", ["copula", "copula-joints"])
+def test_the_column_mask_draws_as_the_kernels_did(modelo, kernel):
+    """The mask (`_score_columns`) replaced one branch per kernel: "copula" was the
+    Liu-West draw on every column's scores, "copula-joints" on the joints' scores with the
+    rest's values. Those formulas, written out, give the same numbers to the bit, so the
+    committed sweeps' draws are unchanged."""
+    from vlr.filter import _liu_west
+
+    rng = np.random.default_rng(9)
+    n_th = modelo.n_fingers * modelo.n_joints
+    x = rng.normal(size=(2000, n_th + 7))
+    x[:, 0] = np.abs(x[:, 0])
+    cfg = FilterConfig(n_particles=2000, seed=11, jitter_kernel=kernel)
+    got = ParticleFilter(modelo, ObjectParams(mass=0.1, com=(0.0, 0.0, 0.0)), cfg)._kernel(x)[0]
+    h = cfg.jitter_h
+    a = np.sqrt(1.0 - h * h)
+    draw = np.random.default_rng(11)
+    cols = slice(None) if kernel == "copula" else slice(0, n_th)
+    scores = NormalScores.fit(x[:, cols])
+    y = x.copy()
+    y[:, cols] = scores.to_normal(x[:, cols])
+    want = _liu_west(y, a, h, draw)
+    want[:, cols] = scores.from_normal(want[:, cols])
+    np.testing.assert_array_equal(got, want)

@@ -824,12 +824,17 @@ class ParticleFilter:
         a = np.sqrt(1.0 - h * h) if cfg.liu_west_shrink else 1.0
         on_scores = self._score_columns(x)
         if on_scores.any():
-            # The chosen columns on their normal scores, the rest as they are.
-            scores = NormalScores.fit(x[:, on_scores])
+            # The chosen columns on their normal scores, the rest as they are. A run of
+            # columns is taken as a slice: a view sums in the order the kernels' earlier
+            # branches did, so their draws stay the same to the bit.
+            idx = np.flatnonzero(on_scores)
+            cols = (slice(idx[0], idx[-1] + 1) if idx[-1] - idx[0] + 1 == len(idx)
+                    else idx)
+            scores = NormalScores.fit(x[:, cols])
             y = x.copy()
-            y[:, on_scores] = scores.to_normal(x[:, on_scores])
+            y[:, cols] = scores.to_normal(x[:, cols])
             x_new = _liu_west(y, a, h, self.rng)
-            x_new[:, on_scores] = scores.from_normal(x_new[:, on_scores])
+            x_new[:, cols] = scores.from_normal(x_new[:, cols])
         else:
             x_new = _liu_west(x, a, h, self.rng)
         mean = x.mean(axis=0)
