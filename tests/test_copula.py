@@ -247,3 +247,45 @@ def test_the_column_mask_draws_as_the_kernels_did(modelo, kernel):
     want = _liu_west(y, a, h, draw)
     want[:, cols] = scores.from_normal(want[:, cols])
     np.testing.assert_array_equal(got, want)
+
+
+def test_log_scales_keeps_a_log_normal_springs_median(modelo):
+    """"log-scales" draws a scale unknown on its logarithm: a log-normal spring (its median
+    below its mean) keeps its median, where the values' kernel moves it up towards the
+    mean; the joints stay on their values (the same draw as "gaussian" there)."""
+    rng = np.random.default_rng(10)
+    n = 20_000
+    n_th = modelo.n_fingers * modelo.n_joints
+    unknowns = ("stiffness:thumb.distal",)
+    x = rng.normal(size=(n, n_th + 2))
+    x[:, -1] = 0.03 * np.exp(0.3 * x[:, -1])            # median 0.03, mean 0.0314
+    got = {}
+    for kernel in ("gaussian", "log-scales"):
+        pf = ParticleFilter(modelo, ObjectParams(mass=0.1, com=(0.0, 0.0, 0.0)),
+                            FilterConfig(n_particles=n, seed=3, jitter_kernel=kernel,
+                                         unknowns=unknowns))
+        lo, hi = pf.unknowns[0].prior
+        assert lo < 0.03 * np.exp(-1.2) and hi > 0.03 * np.exp(1.2)
+        y = x.copy()
+        for _ in range(10):
+            y, _ = pf._kernel(y)
+        got[kernel] = y
+    med0 = np.median(x[:, -1])
+    assert abs(np.median(got["log-scales"][:, -1]) / med0 - 1.0) < 0.01
+    assert np.median(got["gaussian"][:, -1]) / med0 - 1.0 > 0.03
+    assert np.std(np.log(got["log-scales"][:, -1])) == pytest.approx(0.3, rel=0.03)
+    assert not ParticleFilter(modelo, ObjectParams(mass=0.1, com=(0.0, 0.0, 0.0)),
+                              FilterConfig(n_particles=10, jitter_kernel="log-scales",
+                                           unknowns=unknowns))._score_columns(x).any()
+
+
+def test_log_scales_without_a_scale_unknown_is_the_default_draw(modelo):
+    rng = np.random.default_rng(12)
+    x = rng.normal(size=(500, modelo.n_fingers * modelo.n_joints + 6 + 1))
+    draws = []
+    for kernel in ("gaussian", "log-scales"):
+        pf = ParticleFilter(modelo, ObjectParams(mass=0.1, com=(0.0, 0.0, 0.0)),
+                            FilterConfig(n_particles=500, seed=4, jitter_kernel=kernel,
+                                         unknowns=("length:left.proximal",)))
+        draws.append(pf._kernel(x.copy())[0])
+    np.testing.assert_array_equal(draws[0], draws[1])

@@ -354,7 +354,7 @@ CONTACT_PRIORS = ("pad", "surface")
 # How the scale unknowns are drawn over their priors (`FilterConfig.prior_shape`).
 PRIOR_SHAPES = ("uniform", "log-uniform")
 JITTER_KERNELS = ("gaussian", "copula", "copula-joints", "copula-scales",
-                  "copula-joints-scales")
+                  "copula-joints-scales", "log-scales")
 LOG_PRIOR_KINDS = ("stiffness", "tendon", "mass")
 
 # A prior of which no particle settles at the grasp command is drawn again this many times in
@@ -411,7 +411,9 @@ class FilterConfig:
             marginals' shapes (docs/RESULTS.md 5, session 39); "copula-joints", on the
             joint angles' scores and the other dimensions' values; "copula-scales", on the
             scale unknowns' scores (`LOG_PRIOR_KINDS`: positive, their posteriors skewed)
-            and the rest's values; "copula-joints-scales", on both's scores (session 40).
+            and the rest's values; "copula-joints-scales", on both's scores (session 40);
+            "log-scales", on the scale unknowns' logarithms (Liu and West 2001, section
+            3.3: a positive parameter's kernel on its log; session 41).
         liu_west_shrink: shrink towards the mean by sqrt(1 - h^2) so jitter keeps variance.
         ci_threshold_deg: convergence when the mean 95% interval width of the joint angles
             falls below this [deg] (METHOD.md 3).
@@ -816,7 +818,9 @@ class ParticleFilter:
         With `jitter_kernel` "copula" the draw is made on each dimension's normal scores
         (`vlr.copula`), which keeps the marginals' shapes (a joint cut at its stop);
         "copula-joints" on the joint angles' scores alone, "copula-scales" on the scale
-        unknowns', "copula-joints-scales" on both (`_score_columns`).
+        unknowns', "copula-joints-scales" on both (`_score_columns`); "log-scales" on the
+        scale unknowns' logarithms (x -> log x, the draw, exp), a fixed transform where the
+        scores follow the particles' own ranks.
         Returns x' and the rows that moved (None: all; with `jitter_keep_parent` the first
         copy of each resampled parent stays as it was)."""
         cfg = self.config
@@ -835,6 +839,12 @@ class ParticleFilter:
             y[:, cols] = scores.to_normal(x[:, cols])
             x_new = _liu_west(y, a, h, self.rng)
             x_new[:, cols] = scores.from_normal(x_new[:, cols])
+        elif cfg.jitter_kernel == "log-scales":
+            on_log = self._scale_columns(x.shape[1])
+            y = x.copy()
+            y[:, on_log] = np.log(x[:, on_log])
+            x_new = _liu_west(y, a, h, self.rng)
+            x_new[:, on_log] = np.exp(x_new[:, on_log])
         else:
             x_new = _liu_west(x, a, h, self.rng)
         mean = x.mean(axis=0)
@@ -873,9 +883,16 @@ class ParticleFilter:
         if kernel in ("copula-joints", "copula-joints-scales"):
             mask[:self.model.n_fingers * self.model.n_joints] = True
         if kernel in ("copula-scales", "copula-joints-scales"):
-            base = n_columns - len(self.unknowns)
-            for j, u in enumerate(self.unknowns):
-                mask[base + j] = u.kind in LOG_PRIOR_KINDS
+            mask |= self._scale_columns(n_columns)
+        return mask
+
+    def _scale_columns(self, n_columns: int) -> np.ndarray:
+        """The scale unknowns' columns (`LOG_PRIOR_KINDS`: positive) among `n_columns`
+        sampled dimensions, the unknowns last: a boolean mask."""
+        mask = np.zeros(n_columns, dtype=bool)
+        base = n_columns - len(self.unknowns)
+        for j, u in enumerate(self.unknowns):
+            mask[base + j] = u.kind in LOG_PRIOR_KINDS
         return mask
 
     def _jitter(self, x: np.ndarray, parents: np.ndarray | None = None) -> np.ndarray | None:

@@ -202,8 +202,8 @@ class TrialSettings:
             slide_friction or spin_friction (the friction in the energy already slides).
         jitter_h: the filter's Liu-West bandwidth (`vlr.filter.FilterConfig.jitter_h`);
             None: its default.
-        jitter_kernel: "gaussian", "copula", "copula-joints", "copula-scales" or
-            "copula-joints-scales", the space of the filter's Liu-West
+        jitter_kernel: "gaussian", "copula", "copula-joints", "copula-scales",
+            "copula-joints-scales" or "log-scales", the space of the filter's Liu-West
             draw (`vlr.filter.FilterConfig.jitter_kernel`).
         priors: {unknown spec: [low, high]} the uniform prior of an unknown in its SI unit
             (e.g. {"stiffness:thumb.distal": [0.01, 0.08]} N m/rad); an unknown not named

@@ -19,7 +19,7 @@ import numpy as np
 # `vlr.filter.JITTER_KERNELS`, spelt out so that the CLI starts without importing the filter
 # (0.6 s); tests/test_copula.py checks that the two agree.
 JITTER_KERNELS = ("gaussian", "copula", "copula-joints", "copula-scales",
-                  "copula-joints-scales")
+                  "copula-joints-scales", "log-scales")
 
 # Below this share of true joints inside the grasp prior's intervals (scored against the
 # sim's or the synthetic world's truth), the run's table says the guess missed the grasp.
@@ -172,7 +172,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "(gaussian, the default), or each one's normal scores (copula), which keeps "
                    "a joint's posterior cut at its stop from drifting off it; or the joint "
                    "angles' scores alone (copula-joints), the scale unknowns' (a spring, the "
-                   "tendon, the mass: copula-scales), or both (copula-joints-scales)")
+                   "tendon, the mass: copula-scales), or both (copula-joints-scales); or the "
+                   "scale unknowns' logarithms (log-scales)")
     p.add_argument("--link-scaling", action="store_true",
                    help="a link of unknown length weighs as the nominal link scaled to its "
                    "length (default: the nominal weights)")
