@@ -14,6 +14,8 @@ cases); a seed found twice is an error.
     python docs/scripts/unknown_path.py runs/sweep-sim-60k-stiffness-40 [--at 15 20 30 40]
     python docs/scripts/unknown_path.py runs/sweep-sim-60k-surface-stops-40 \
         runs/sweep-sim-60k-surface-stops-40-heldout --median --at 20 30 40
+    python docs/scripts/unknown_path.py runs/sweep-sim-60k-log-scales --median --at 35 \
+        --seeds 5-14
 """
 
 import argparse
@@ -52,13 +54,25 @@ def main() -> None:
                     help="action counts (default 15 20 30 40)")
     ap.add_argument("--median", action="store_true",
                     help="the posterior median's errors, and every joint's mean error [deg]")
+    ap.add_argument("--seeds", default=None, metavar="SEEDS",
+                    help="only these seeds, e.g. 5-14 (a held-out set; default all)")
     args = ap.parse_args()
+    keep = None
+    if args.seeds is not None:
+        from vlr.errors import UserError
+        from vlr.sweep import parse_seeds
+        try:
+            keep = set(parse_seeds(args.seeds))
+        except UserError as e:
+            ap.error(str(e))
     for out in args.out:
         if not (out / "trials").is_dir():
             ap.error(f"{str(out)!r} has no trials/ folder: not a sweep's output folder")
     groups: dict[tuple[str, str], dict[int, list[float]]] = {}
     for out in args.out:
         for case, seed, spec, errs in paths(out, args.median):
+            if keep is not None and seed not in keep:
+                continue
             row = [errs[n] if n < len(errs) else float("nan") for n in args.at]
             print(f"{case} | {spec} | seed {seed} | "
                   + " ".join(f"{n}: {e:.4g}" for n, e in zip(args.at, row, strict=True)))
