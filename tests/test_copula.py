@@ -289,3 +289,28 @@ def test_log_scales_without_a_scale_unknown_is_the_default_draw(modelo):
                                          unknowns=("length:left.proximal",)))
         draws.append(pf._kernel(x.copy())[0])
     np.testing.assert_array_equal(draws[0], draws[1])
+
+
+def test_log_springs_draws_the_spring_on_its_log_and_the_mass_on_its_values(modelo):
+    """"log-springs" (the default): over ten draws a log-normal spring keeps its median, as
+    with "log-scales", and a log-normal object's mass has its median moved up towards its
+    mean, as with "gaussian"; "log-scales" keeps both."""
+    rng = np.random.default_rng(13)
+    n = 20_000
+    n_th = modelo.n_fingers * modelo.n_joints
+    x = rng.normal(size=(n, n_th + 2 + 2))
+    x[:, -2] = 0.03 * np.exp(0.3 * rng.normal(size=n))      # the spring
+    x[:, -1] = 0.07 * np.exp(0.3 * rng.normal(size=n))      # the mass
+    shift = {}
+    for kernel in ("gaussian", "log-scales", "log-springs"):
+        pf = ParticleFilter(modelo, ObjectParams(mass=0.07, com=(0.0, 0.0, 0.0)),
+                            FilterConfig(n_particles=n, seed=5, jitter_kernel=kernel,
+                                         unknowns=("stiffness:thumb.distal", "mass")))
+        y = x.copy()
+        for _ in range(10):
+            y, _ = pf._kernel(y)
+        shift[kernel] = np.median(y[:, -2:], axis=0) / np.median(x[:, -2:], axis=0) - 1.0
+    assert FilterConfig().jitter_kernel == "log-springs"
+    assert np.all(shift["gaussian"] > 0.03)
+    assert np.all(np.abs(shift["log-scales"]) < 0.01)
+    assert abs(shift["log-springs"][0]) < 0.01 and shift["log-springs"][1] > 0.03

@@ -73,21 +73,23 @@ def test_sim_from_rendered_frames(obj, max_proximal_deg):
 
 def test_sim_unknown_thumb_distal_stiffness():
     # Measured (3k particles, 20 actions, rolling, the sim's default likelihood with the turn
-    # term, the surface contact prior, stops at 17 and the 0.1 s ramp): the replaced spring
-    # (true 0.045 N m/rad, the filter's nominal 0.030) found to 0.0067, interval 0.043-0.061,
-    # proximal 5.1 deg (seed 1: 0.0071, interval 0.045-0.061; the paper 0.0026). With the
-    # 50 ms ramp: 0.0029, interval 0.040-0.057, proximal 3.0 deg (seed 1: 0.0086, interval
-    # 0.046-0.061, missing it). With the stops at
-    # 100: 0.0024, interval 0.038-0.058, proximal 4.5 deg (seed 1: 0.0106, interval
-    # 0.048-0.064). With the pad prior: 0.0011,
-    # interval 0.033-0.056 (seed 1: 0.0053, interval 0.044-0.058). At 0.35 mm / 0.7 deg
-    # without the turn: 0.0040, interval 0.035-0.065 (seed 1 0.0031). The prior's mean
-    # (uniform, 0.0075-0.12) is 0.019 off.
+    # term, the surface contact prior, stops at 17, the 0.1 s ramp and the Liu-West draw on
+    # the spring's logarithm, the default since session 41): the replaced spring (true 0.045
+    # N m/rad, the filter's nominal 0.030) found to 0.0027, interval 0.039-0.057, proximal
+    # 3.1 deg (seed 1: 0.0102, interval 0.046-0.065, missing it; the paper 0.0026). The
+    # threshold fails the draw on the values (jitter_kernel "gaussian", the default before):
+    # 0.0067, interval 0.043-0.061, proximal 5.1 deg (seed 1: 0.0071, interval 0.045-0.061).
+    # Earlier, on the values: with the 50 ms ramp 0.0029, interval 0.040-0.057, proximal
+    # 3.0 deg (seed 1: 0.0086, interval 0.046-0.061, missing it). With the stops at 100:
+    # 0.0024, interval 0.038-0.058, proximal 4.5 deg (seed 1: 0.0106, interval 0.048-0.064).
+    # With the pad prior: 0.0011, interval 0.033-0.056 (seed 1: 0.0053, interval
+    # 0.044-0.058). At 0.35 mm / 0.7 deg without the turn: 0.0040, interval 0.035-0.065
+    # (seed 1 0.0031). The prior's mean (uniform, 0.0075-0.12) is 0.019 off.
     r = _run(backend="sim", object="toy_block", true_hand="modelo_thumb45", particles=3000,
              seed=0, max_iterations=20, nominal_theta_deg=(-10.0, 15.0), prior_spread_deg=10.0,
              unknowns=("stiffness:thumb.distal",))
     est = r["unknown_estimates"]["stiffness:thumb.distal"]
-    assert r["errors"]["stiffness"]["thumb.distal"] < 0.01
+    assert r["errors"]["stiffness"]["thumb.distal"] < 0.005
     assert est["low"] <= 0.045 <= est["high"]
 
 

@@ -237,7 +237,7 @@ def test_contact_stiffness_anneal_stages_link_scaling_and_priors_reach_the_filte
     narrow = identify_config(TrialSettings(backend="synthetic", particles=50, jitter_h=0.1),
                              model).filter
     assert narrow.jitter_h == 0.1
-    assert default.jitter_kernel == "gaussian"
+    assert default.jitter_kernel == "log-springs" == FilterConfig.jitter_kernel
     assert identify_config(TrialSettings(backend="synthetic", particles=50,
                                          jitter_kernel="copula"),
                            model).filter.jitter_kernel == "copula"

@@ -354,8 +354,14 @@ CONTACT_PRIORS = ("pad", "surface")
 # How the scale unknowns are drawn over their priors (`FilterConfig.prior_shape`).
 PRIOR_SHAPES = ("uniform", "log-uniform")
 JITTER_KERNELS = ("gaussian", "copula", "copula-joints", "copula-scales",
-                  "copula-joints-scales", "log-scales")
+                  "copula-joints-scales", "log-scales", "log-springs")
 LOG_PRIOR_KINDS = ("stiffness", "tendon", "mass")
+# The scale unknowns whose evidence is a deflection that goes as 1/k (a joint's spring, the
+# tendon's): a likelihood near symmetric in 1/k is skewed on k and close to symmetric on
+# log k. The object's mass loads the hand linearly, and on its logarithm its estimates
+# moved down, worse on two objects of four. "log-springs" draws the springs on their
+# logarithms (docs/RESULTS.md 5, session 41).
+SPRING_KINDS = ("stiffness", "tendon")
 
 # A prior of which no particle settles at the grasp command is drawn again this many times in
 # all: a small filter's unlucky draw (1000 particles in a task's check) is not a lost grasp.
@@ -404,16 +410,21 @@ class FilterConfig:
             coverage of the known hand / unknown stiffness / NH1 went 0.90 / 0.77 / 0.53 at
             0.2, 0.97 / 0.86 / 0.53 at 0.3 and 0.97 / 0.91 / 0.78 at 0.4, at the cost of a
             few more iterations: the wider kernel keeps exploring the contact-angle ridges.
-        jitter_kernel: "gaussian", Liu and West's kernel on the sampled dimensions as they
-            are, which makes every marginal Gaussian over repeated draws (its median drifts
-            to its mean: a joint cut at its open stop drifts off it); or "copula", the same
-            kernel on each dimension's normal scores (`vlr.copula`), which keeps the
-            marginals' shapes (docs/RESULTS.md 5, session 39); "copula-joints", on the
-            joint angles' scores and the other dimensions' values; "copula-scales", on the
-            scale unknowns' scores (`LOG_PRIOR_KINDS`: positive, their posteriors skewed)
-            and the rest's values; "copula-joints-scales", on both's scores (session 40);
-            "log-scales", on the scale unknowns' logarithms (Liu and West 2001, section
-            3.3: a positive parameter's kernel on its log; session 41).
+        jitter_kernel: "log-springs" (the default since session 41), Liu and West's kernel
+            on the springs' logarithms (`SPRING_KINDS`: a joint's spring, the tendon;
+            positive, their evidence a deflection that goes as 1/k; Liu and West 2001,
+            section 3.3) and on every other dimension's values: the spring row's lean
+            halved, every row without a spring unknown drawn as by "gaussian"
+            (docs/RESULTS.md 5, session 41); "log-scales", the object's mass on its
+            logarithm too (it moves the mass's estimates about 8% down: the apple's and the
+            wine glass's worse, the flat screwdriver's better); "gaussian", the kernel on
+            every dimension's values, which makes every marginal Gaussian over repeated
+            draws (its median drifts to its mean: a joint cut at its open stop drifts off
+            it, a skewed spring up); "copula", on each dimension's normal scores
+            (`vlr.copula`), which keeps the marginals' shapes (session 39);
+            "copula-joints", on the joint angles' scores and the other dimensions' values;
+            "copula-scales", on the scale unknowns' (`LOG_PRIOR_KINDS`) scores and the
+            rest's values; "copula-joints-scales", on both's scores (session 40).
         liu_west_shrink: shrink towards the mean by sqrt(1 - h^2) so jitter keeps variance.
         ci_threshold_deg: convergence when the mean 95% interval width of the joint angles
             falls below this [deg] (METHOD.md 3).
@@ -448,7 +459,7 @@ class FilterConfig:
     unknown_discount: float = 1.0
     ess_fraction: float = 0.1
     jitter_h: float = 0.4
-    jitter_kernel: str = "gaussian"
+    jitter_kernel: str = "log-springs"
     liu_west_shrink: bool = True
     ci_threshold_deg: float = 2.0
     motion: MotionConfig = field(default_factory=MotionConfig)
@@ -818,9 +829,10 @@ class ParticleFilter:
         With `jitter_kernel` "copula" the draw is made on each dimension's normal scores
         (`vlr.copula`), which keeps the marginals' shapes (a joint cut at its stop);
         "copula-joints" on the joint angles' scores alone, "copula-scales" on the scale
-        unknowns', "copula-joints-scales" on both (`_score_columns`); "log-scales" on the
-        scale unknowns' logarithms (x -> log x, the draw, exp), a fixed transform where the
-        scores follow the particles' own ranks.
+        unknowns', "copula-joints-scales" on both (`_score_columns`); "log-springs" (the
+        default) on the springs' logarithms (x -> log x, the draw, exp), "log-scales" on
+        every scale unknown's: a fixed transform where the scores follow the particles'
+        own ranks.
         Returns x' and the rows that moved (None: all; with `jitter_keep_parent` the first
         copy of each resampled parent stays as it was)."""
         cfg = self.config
@@ -839,8 +851,9 @@ class ParticleFilter:
             y[:, cols] = scores.to_normal(x[:, cols])
             x_new = _liu_west(y, a, h, self.rng)
             x_new[:, cols] = scores.from_normal(x_new[:, cols])
-        elif cfg.jitter_kernel == "log-scales":
-            on_log = self._scale_columns(x.shape[1])
+        elif cfg.jitter_kernel in ("log-scales", "log-springs"):
+            kinds = SPRING_KINDS if cfg.jitter_kernel == "log-springs" else LOG_PRIOR_KINDS
+            on_log = self._scale_columns(x.shape[1], kinds)
             y = x.copy()
             y[:, on_log] = np.log(x[:, on_log])
             x_new = _liu_west(y, a, h, self.rng)
@@ -883,16 +896,16 @@ class ParticleFilter:
         if kernel in ("copula-joints", "copula-joints-scales"):
             mask[:self.model.n_fingers * self.model.n_joints] = True
         if kernel in ("copula-scales", "copula-joints-scales"):
-            mask |= self._scale_columns(n_columns)
+            mask |= self._scale_columns(n_columns, LOG_PRIOR_KINDS)
         return mask
 
-    def _scale_columns(self, n_columns: int) -> np.ndarray:
-        """The scale unknowns' columns (`LOG_PRIOR_KINDS`: positive) among `n_columns`
-        sampled dimensions, the unknowns last: a boolean mask."""
+    def _scale_columns(self, n_columns: int, kinds: tuple[str, ...]) -> np.ndarray:
+        """The columns of the unknowns of these `kinds` (scale unknowns: positive) among
+        `n_columns` sampled dimensions, the unknowns last: a boolean mask."""
         mask = np.zeros(n_columns, dtype=bool)
         base = n_columns - len(self.unknowns)
         for j, u in enumerate(self.unknowns):
-            mask[base + j] = u.kind in LOG_PRIOR_KINDS
+            mask[base + j] = u.kind in kinds
         return mask
 
     def _jitter(self, x: np.ndarray, parents: np.ndarray | None = None) -> np.ndarray | None:

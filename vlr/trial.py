@@ -202,9 +202,9 @@ class TrialSettings:
             slide_friction or spin_friction (the friction in the energy already slides).
         jitter_h: the filter's Liu-West bandwidth (`vlr.filter.FilterConfig.jitter_h`);
             None: its default.
-        jitter_kernel: "gaussian", "copula", "copula-joints", "copula-scales",
-            "copula-joints-scales" or "log-scales", the space of the filter's Liu-West
-            draw (`vlr.filter.FilterConfig.jitter_kernel`).
+        jitter_kernel: "log-springs" (the default), "log-scales", "gaussian", "copula",
+            "copula-joints", "copula-scales" or "copula-joints-scales", the space of the
+            filter's Liu-West draw (`vlr.filter.FilterConfig.jitter_kernel`).
         priors: {unknown spec: [low, high]} the uniform prior of an unknown in its SI unit
             (e.g. {"stiffness:thumb.distal": [0.01, 0.08]} N m/rad); an unknown not named
             keeps its default (`vlr.filter.parse_unknown`). Each must be among `unknowns`.
@@ -275,7 +275,7 @@ class TrialSettings:
     cone_return: float | None = None
     link_scaling: bool = False
     jitter_h: float | None = None
-    jitter_kernel: str = "gaussian"
+    jitter_kernel: str = "log-springs"
     noise_prior: tuple[float, float] | None = None
     priors: dict[str, tuple[float, float]] = field(default_factory=dict)
     prior_shape: str = "uniform"

@@ -19,7 +19,7 @@ import numpy as np
 # `vlr.filter.JITTER_KERNELS`, spelt out so that the CLI starts without importing the filter
 # (0.6 s); tests/test_copula.py checks that the two agree.
 JITTER_KERNELS = ("gaussian", "copula", "copula-joints", "copula-scales",
-                  "copula-joints-scales", "log-scales")
+                  "copula-joints-scales", "log-scales", "log-springs")
 
 # Below this share of true joints inside the grasp prior's intervals (scored against the
 # sim's or the synthetic world's truth), the run's table says the guess missed the grasp.
@@ -167,13 +167,15 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jitter-h", type=float, default=None, metavar="H",
                    help="the filter's Liu-West bandwidth, in [0, 1) (default 0.4; "
                    "RESULTS.md section 5: narrower converges, confidently wrong)")
-    p.add_argument("--jitter-kernel", choices=JITTER_KERNELS, default="gaussian",
-                   help="where the Liu-West draw is made: the sampled dimensions as they are "
-                   "(gaussian, the default), or each one's normal scores (copula), which keeps "
-                   "a joint's posterior cut at its stop from drifting off it; or the joint "
-                   "angles' scores alone (copula-joints), the scale unknowns' (a spring, the "
-                   "tendon, the mass: copula-scales), or both (copula-joints-scales); or the "
-                   "scale unknowns' logarithms (log-scales)")
+    p.add_argument("--jitter-kernel", choices=JITTER_KERNELS, default="log-springs",
+                   help="where the Liu-West draw is made: the springs (a joint's, the "
+                   "tendon's) on their logarithms and the rest as they are (log-springs, the "
+                   "default); the object's mass on its logarithm too (log-scales); every "
+                   "dimension as it is (gaussian); each "
+                   "one's normal scores (copula), which keeps a joint's posterior cut at its "
+                   "stop from drifting off it; or the joint angles' scores alone "
+                   "(copula-joints), the scale unknowns' (copula-scales), or both "
+                   "(copula-joints-scales)")
     p.add_argument("--link-scaling", action="store_true",
                    help="a link of unknown length weighs as the nominal link scaled to its "
                    "length (default: the nominal weights)")
@@ -377,7 +379,10 @@ def format_table(result, summary: dict, model) -> str:
                                      "leans on it"))
     lines.append(f"filter: {summary['timing']['filter_s_per_iteration_median']:.3f} s per "
                  "iteration (median)"
-                 + {"copula": ", the jitter drawn on normal scores (copula)",
+                 + {"gaussian": ", the jitter drawn on every dimension's values (gaussian)",
+                    "log-scales": ", the jitter drawn on the scale unknowns' logarithms "
+                                  "(log-scales)",
+                    "copula": ", the jitter drawn on normal scores (copula)",
                     "copula-joints": ", the jitter drawn on the joints' normal scores "
                                      "(copula-joints)",
                     "copula-scales": ", the jitter drawn on the scale unknowns' normal "
