@@ -225,7 +225,8 @@ def test_the_row_gives_the_objects_unknowns_in_grams_and_millimetres():
                       "unknown_estimates": {
                           "mass": {"mean": 0.06, "median": 0.058, "low": 0.023, "high": 0.096},
                           "com:z": {"mean": 0.04, "median": 0.041, "low": 0.03, "high": 0.05},
-                          "stiffness:thumb.distal": {"median": 0.04}}}}
+                          "stiffness:thumb.distal": {"median": 0.04},
+                          "tendon": {"median": 18000.0, "low": 15000.0, "high": 21600.0}}}}
     row = _row(rec)
     assert (row["object_mass_g"], row["object_com_mm.z"]) == (12.5, 3.0)
     assert row["object_mass_g_median"] == 10.0
@@ -234,6 +235,7 @@ def test_the_row_gives_the_objects_unknowns_in_grams_and_millimetres():
         (58.0, 23.0, 96.0))
     assert row["com_z_mm.median"] == pytest.approx(41.0)
     assert row["spring_thumb.distal.median"] == pytest.approx(0.04)
+    assert (row["tendon_all_n_per_m.low"], row["tendon_all_n_per_m.high"]) == (15000.0, 21600.0)
     assert not any(k.startswith("stiffness:") for k in row)
     s = summarize_rows([row])[0]
     assert s["object_mass_g error [g]"] == "12.50"

@@ -313,14 +313,16 @@ def _object_unknowns(row: dict[str, Any], errors: dict[str, Any], suffix: str) -
 
 def _unknown_estimates(row: dict[str, Any], estimates: dict[str, Any]) -> None:
     """The unknowns' estimates themselves (posterior median and 95% interval), in grams,
-    millimetres, 1/m and N m/rad: `mass_g.median`, `com_x_mm.low`, `curvature_all.high`,
-    `length_left.proximal_mm.median`, `spring_thumb.distal.median`, ... The errors above lose
-    their sign and whether the interval held the truth."""
+    millimetres, 1/m, N m/rad and N/m: `mass_g.median`, `com_x_mm.low`,
+    `curvature_all.high`, `length_left.proximal_mm.median`, `spring_thumb.distal.median`,
+    `tendon_all_n_per_m.median`, ... The errors above lose their sign and whether the
+    interval held the truth."""
     for spec, e in estimates.items():
         kind, _, where = spec.partition(":")
         names = {"mass": ("mass_g", 1e3), "com": (f"com_{where}_mm", 1e3),
                  "curvature": (f"curvature_{where or 'all'}", 1.0),
-                 "length": (f"length_{where}_mm", 1e3), "stiffness": (f"spring_{where}", 1.0)}
+                 "length": (f"length_{where}_mm", 1e3), "stiffness": (f"spring_{where}", 1.0),
+                 "tendon": (f"tendon_{where or 'all'}_n_per_m", 1.0)}
         if kind not in names or not isinstance(e, dict):
             continue
         name, scale = names[kind]
