@@ -209,15 +209,16 @@ def test_the_scores_mask_names_the_columns(modelo):
     assert list(np.flatnonzero(masks["copula-joints-scales"])) == list(range(n_th)) + [n_th + 3]
 
 
-def test_copula_scales_without_a_scale_unknown_is_the_default_draw(modelo):
-    """A row without a scale unknown (the known hand, link lengths) draws with
-    "copula-scales" exactly as with "gaussian": same random stream, same numbers."""
+@pytest.mark.parametrize("kernel", ["copula-scales", "log-scales", "log-springs"])
+def test_a_row_without_a_scale_unknown_draws_as_the_gaussian_kernel(modelo, kernel):
+    """A row without a scale unknown (the known hand, link lengths) draws with the scale
+    unknowns' kernels exactly as with "gaussian": same random stream, same numbers."""
     rng = np.random.default_rng(8)
     x = rng.normal(size=(500, modelo.n_fingers * modelo.n_joints + 6 + 1))
     draws = []
-    for kernel in ("gaussian", "copula-scales"):
+    for k in ("gaussian", kernel):
         pf = ParticleFilter(modelo, ObjectParams(mass=0.1, com=(0.0, 0.0, 0.0)),
-                            FilterConfig(n_particles=500, seed=4, jitter_kernel=kernel,
+                            FilterConfig(n_particles=500, seed=4, jitter_kernel=k,
                                          unknowns=("length:left.proximal",)))
         draws.append(pf._kernel(x.copy())[0])
     np.testing.assert_array_equal(draws[0], draws[1])
@@ -277,18 +278,6 @@ def test_log_scales_keeps_a_log_normal_springs_median(modelo):
     assert not ParticleFilter(modelo, ObjectParams(mass=0.1, com=(0.0, 0.0, 0.0)),
                               FilterConfig(n_particles=10, jitter_kernel="log-scales",
                                            unknowns=unknowns))._score_columns(x).any()
-
-
-def test_log_scales_without_a_scale_unknown_is_the_default_draw(modelo):
-    rng = np.random.default_rng(12)
-    x = rng.normal(size=(500, modelo.n_fingers * modelo.n_joints + 6 + 1))
-    draws = []
-    for kernel in ("gaussian", "log-scales"):
-        pf = ParticleFilter(modelo, ObjectParams(mass=0.1, com=(0.0, 0.0, 0.0)),
-                            FilterConfig(n_particles=500, seed=4, jitter_kernel=kernel,
-                                         unknowns=("length:left.proximal",)))
-        draws.append(pf._kernel(x.copy())[0])
-    np.testing.assert_array_equal(draws[0], draws[1])
 
 
 def test_log_springs_draws_the_spring_on_its_log_and_the_mass_on_its_values(modelo):
