@@ -416,7 +416,7 @@ class FilterConfig:
             section 3.3) and on every other dimension's values: the spring row's lean
             halved, every row without a spring unknown drawn as by "gaussian"
             (docs/RESULTS.md 5, session 41); "log-scales", the object's mass on its
-            logarithm too (it moves the mass's estimates about 8% down: the apple's and the
+            logarithm too (it moves the mass's estimates 7-16% down: the apple's and the
             wine glass's worse, the flat screwdriver's better); "gaussian", the kernel on
             every dimension's values, which makes every marginal Gaussian over repeated
             draws (its median drifts to its mean: a joint cut at its open stop drifts off
