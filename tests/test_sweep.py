@@ -70,6 +70,28 @@ def test_a_failed_trial_is_recorded_and_the_sweep_goes_on(tmp_path):
     assert saved["status"] == "error"
 
 
+def test_a_trial_record_names_the_commit_it_ran_at(tmp_path):
+    """The record carries the checkout's commit (`vlr.provenance`), so a table's figures
+    name their code; outside a git checkout it is None."""
+    import subprocess
+
+    t = Trial("bad", TrialSettings(backend="synthetic", object="no_such_object",
+                                   particles=200, max_iterations=1))
+    code = run_one(t, tmp_path)["code"]
+    root = Path(__file__).resolve().parent.parent
+    if not (root / ".git").exists():
+        assert code is None
+        return
+    head = subprocess.run(["git", "-C", str(root), "rev-parse", "HEAD"], capture_output=True,
+                          text=True, check=True).stdout.strip()
+    assert code["commit"] == head and isinstance(code["dirty"], bool)
+    from vlr.sweep import _row
+
+    assert _row({"case": "c", "status": "ok", "settings": {}, "result": {},
+                 "code": {"commit": "0123456789abcdef", "dirty": True}})["commit"] == \
+        "0123456789ab+dirty"
+
+
 def test_bad_sweep_files_name_the_problem(tmp_path):
     p = tmp_path / "s.yaml"
     p.write_text("seeds: 0\nout: x\nsettings: {particlez: 10}\n")

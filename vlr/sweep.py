@@ -241,10 +241,11 @@ def run_one(trial: Trial, out: Path, keep_files: bool = False,
 
     Runs in a worker process (top-level function: picklable) or a Ray task
     (`vlr.executors`). Seeds fix its numbers whichever worker runs it."""
+    from vlr.provenance import code_version
     from vlr.trial import run_trial
 
     record: dict[str, Any] = {"id": trial.id, "case": trial.case,
-                              "settings": trial.settings.to_dict()}
+                              "settings": trial.settings.to_dict(), "code": code_version()}
     try:
         files = out / "trials" / trial.id if keep_files else None
         result = run_trial(trial.settings, files)
@@ -381,6 +382,9 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
     noise = _get(rec, ("result", "unknown_estimates", "noise", "median"))
     if noise is not None:
         row["noise_scale"] = noise
+    # The code it ran at (`vlr.provenance`; records from before session 41 have none).
+    if (code := rec.get("code")) is not None:
+        row["commit"] = code["commit"][:12] + ("+dirty" if code.get("dirty") else "")
     if rec.get("status") != "ok":
         row["error"] = rec.get("error")
     return row
