@@ -412,12 +412,13 @@ class FilterConfig:
             few more iterations: the wider kernel keeps exploring the contact-angle ridges.
         jitter_kernel: "log-springs" (the default since session 41), Liu and West's kernel
             on the springs' logarithms (`SPRING_KINDS`: a joint's spring, the tendon;
-            positive, their evidence a deflection that goes as 1/k; Liu and West 2001,
-            section 3.3) and on every other dimension's values: the spring row's lean
-            halved, every row without a spring unknown drawn as by "gaussian"
-            (docs/RESULTS.md 5, session 41); "log-scales", the object's mass on its
-            logarithm too (it moves the mass's estimates 7-16% down: the apple's and the
-            wine glass's worse, the flat screwdriver's better); "gaussian", the kernel on
+            positive, their evidence a deflection that goes as 1/k; Liu and West 2001
+            move a positive parameter on its logarithm) and on every other dimension's
+            values: the spring row's lean halved, every row without a spring unknown
+            drawn as by "gaussian" (docs/RESULTS.md 5, session 41); "log-scales", the
+            object's mass on its logarithm too (it moves the mass's estimates 7-16% down:
+            the apple's and the wine glass's worse, the flat screwdriver's better);
+            "gaussian", the kernel on
             every dimension's values, which makes every marginal Gaussian over repeated
             draws (its median drifts to its mean: a joint cut at its open stop drifts off
             it, a skewed spring up); "copula", on each dimension's normal scores
