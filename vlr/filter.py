@@ -418,14 +418,14 @@ class FilterConfig:
             drawn as by "gaussian" (docs/RESULTS.md 5, session 41); "log-scales", the
             object's mass on its logarithm too (it moves the mass's estimates 7-16% down:
             the apple's and the wine glass's worse, the flat screwdriver's better);
-            "gaussian", the kernel on
-            every dimension's values, which makes every marginal Gaussian over repeated
-            draws (its median drifts to its mean: a joint cut at its open stop drifts off
-            it, a skewed spring up); "copula", on each dimension's normal scores
-            (`vlr.copula`), which keeps the marginals' shapes (session 39);
-            "copula-joints", on the joint angles' scores and the other dimensions' values;
-            "copula-scales", on the scale unknowns' (`LOG_PRIOR_KINDS`) scores and the
-            rest's values; "copula-joints-scales", on both's scores (session 40).
+            "gaussian", the kernel on every dimension's values, which makes every
+            marginal Gaussian over repeated draws (its median drifts to its mean: a joint
+            cut at its open stop drifts off it, a skewed spring up); "copula", on each
+            dimension's normal scores (`vlr.copula`), which keeps the marginals' shapes
+            (session 39); "copula-joints", on the joint angles' scores and the other
+            dimensions' values; "copula-scales", on the scale unknowns'
+            (`LOG_PRIOR_KINDS`) scores and the rest's values; "copula-joints-scales", on
+            both's scores (session 40).
         liu_west_shrink: shrink towards the mean by sqrt(1 - h^2) so jitter keeps variance.
         ci_threshold_deg: convergence when the mean 95% interval width of the joint angles
             falls below this [deg] (METHOD.md 3).
