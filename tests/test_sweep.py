@@ -323,3 +323,19 @@ def test_every_documented_sweep_file_still_expands(monkeypatch):
         runs = [line for line in path.read_text().splitlines() if line.startswith("# Run: vlr ")]
         assert runs and all(f" docs/sweeps/{path.name} " in f"{line} " for line in runs), (
             f"{path.name}: its '# Run: vlr ...' line is missing or names another file")
+
+
+def test_a_changed_default_keeps_the_ids_of_the_files_that_pin_it():
+    """The Liu-West draw's default became "log-springs" in session 41; the files measured
+    before pin "gaussian", and their trials keep the ids they were run under (computed at
+    ef18412), so `--resume` and `--table-only` still find them. A setting other than the
+    former default is hashed as before."""
+    from vlr.sweep import Trial
+
+    def trial(**kw):
+        return Trial("spring", TrialSettings(backend="sim", object="toy_block", seed=2,
+                                             unknowns=("stiffness:thumb.distal",), **kw))
+
+    assert trial(jitter_kernel="gaussian").id == "spring_toy_block_modelo_s2_a7901dbd"
+    assert trial(jitter_kernel="copula").id == "spring_toy_block_modelo_s2_df085b96"
+    assert trial().id != trial(jitter_kernel="gaussian").id

@@ -25,6 +25,10 @@ def code_version() -> dict[str, str | bool] | None:
                               text=True, check=True, timeout=10).stdout.strip()
 
     try:
+        # Only the checkout vlr lives in: an installed copy inside some other repository
+        # (a venv in a checkout) is not that repository's code.
+        if Path(git("rev-parse", "--show-toplevel")).resolve() != _ROOT:
+            return None
         commit = git("rev-parse", "HEAD")
         dirty = bool(git("status", "--porcelain", "--untracked-files=no"))
     except (OSError, subprocess.SubprocessError):

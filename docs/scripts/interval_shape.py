@@ -36,7 +36,7 @@ def arms(path: Path, prefix: str) -> dict[str, list[tuple[float, float]]]:
                 continue                              # a failed trial's empty cells
             if not lo < med < hi or lo <= 0:
                 continue
-            out.setdefault(row["case"], []).append(
+            out.setdefault(row.get("case", "?"), []).append(
                 ((hi - med) / (med - lo), np.log(hi / med) / np.log(med / lo)))
     return out
 

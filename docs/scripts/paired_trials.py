@@ -32,11 +32,16 @@ def read(paths: list[Path], column: str) -> dict[tuple[str, int], float]:
             raise UserError(f"{path}: no such file")
         with path.open(newline="") as f:
             rows = list(csv.DictReader(f))
-        if rows and column not in rows[0]:
-            raise UserError(f"{path}: no column {column!r}")
+        for name in ("case", "seed", column):
+            if rows and name not in rows[0]:
+                raise UserError(f"{path}: no column {name!r} (not a sweep table?)")
         for r in rows:
             if r.get(column) not in (None, ""):
-                out[(r["case"], int(r["seed"]))] = float(r[column])
+                try:
+                    out[(r["case"], int(r["seed"]))] = float(r[column])
+                except ValueError:
+                    raise UserError(f"{path}: case {r['case']!r} seed {r['seed']!r}: "
+                                    f"{column} {r[column]!r} is not a number") from None
     return out
 
 
