@@ -339,3 +339,26 @@ def test_a_changed_default_keeps_the_ids_of_the_files_that_pin_it():
     assert trial(jitter_kernel="gaussian").id == "spring_toy_block_modelo_s2_a7901dbd"
     assert trial(jitter_kernel="copula").id == "spring_toy_block_modelo_s2_df085b96"
     assert trial().id != trial(jitter_kernel="gaussian").id
+
+
+def test_a_backends_changed_default_keeps_every_backends_ids():
+    """The synthetic world's action solve became "model" in session 42: a synthetic trial
+    that pins the former "loose" keeps the id it had at 8f0f879, one at the new default
+    gets a new id, and a sim trial, which has no such solve, keeps its id."""
+    from vlr.sweep import Trial
+
+    def synthetic(**kw):
+        return Trial("spring", TrialSettings(backend="synthetic", object="toy_block", seed=2,
+                                             rolling=True, jitter_kernel="gaussian",
+                                             unknowns=("stiffness:thumb.distal",), **kw))
+
+    assert synthetic(synthetic_solve="loose").id == "spring_toy_block_modelo_s2_b69bed29"
+    assert synthetic().id != synthetic(synthetic_solve="loose").id
+    sim = Trial("spring", TrialSettings(backend="sim", object="toy_block", seed=2,
+                                        unknowns=("stiffness:thumb.distal",),
+                                        jitter_kernel="gaussian"))
+    assert sim.id == "spring_toy_block_modelo_s2_a7901dbd"
+    with pytest.raises(UserError, match="synthetic_solve 'loose' is the synthetic world's"):
+        TrialSettings(backend="sim", synthetic_solve="loose")
+    with pytest.raises(UserError, match="synthetic_solve 'exact'"):
+        TrialSettings(backend="synthetic", synthetic_solve="exact")

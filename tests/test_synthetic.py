@@ -115,8 +115,51 @@ def test_the_filter_follows_what_the_world_calls_continuous(modelo):
     np.testing.assert_allclose(start.theta, world.state.theta, atol=1e-9)
 
 
+def rolling_toy_block_world(solve: str) -> SyntheticWorld:
+    """The toy block held by the thumb45 hand at the sim's grasp guess (-10, 15) degrees with
+    rolling contacts, the filter's motion settings, seed 0 (docs/RESULTS.md 5, session 42)."""
+    from vlr.spec import load_object
+    from vlr.trial import TrialSettings
+
+    motion = TrialSettings(backend="synthetic", rolling=True, limit_stiffness=17.0,
+                           object="toy_block").motion_config()
+    cfg = SyntheticConfig(seed=0, grasp_theta=tuple(np.radians([-10.0, 15.0])), motion=motion,
+                          solve=solve)
+    return SyntheticWorld(HandModel.from_spec(load_hand("modelo_thumb45")),
+                          ObjectParams.from_spec(load_object("toy_block")), cfg)
+
+
+def truth_particle_gaps(solve: str, actions: int = 21) -> np.ndarray:
+    """The POM position error [m] of the filter's own solve from the world's true state
+    against the world's next state, action by action."""
+    from vlr.motion import MotionModel
+
+    world = rolling_toy_block_world(solve)
+    model = MotionModel(world.model, world.motion.obj, world.config.motion)
+    world.grasp()
+    rng = np.random.default_rng(100)
+    gaps = []
+    for _ in range(actions):
+        particle, u = world.state.copy(), world.commands
+        delta = random_action(rng, 3)
+        model.solve(particle, u + delta, u_from=u)
+        world.apply(delta)
+        gaps.append(np.linalg.norm(particle.pos[0] - world.state.pos[0]))
+    return np.array(gaps)
+
+
+def test_a_particle_at_the_truth_follows_the_world_exactly():
+    """The world solves an action as a filter particle does (`SyntheticConfig.solve`
+    "model"), so the synthetic world has no model-world gap, even on a move the particle must
+    follow in steps. The former one-shot solve ("loose") ends 1.7 mm off on action 21 of
+    this rolling grasp."""
+    assert truth_particle_gaps("model").max() < 1e-9
+    loose = truth_particle_gaps("loose")
+    assert loose.max() > 1e-3 and np.argmax(loose) == 20
+
+
 @pytest.mark.parametrize("kw", [{"max_regrasps": -1}, {"probe_action": -1e-3},
-                                {"snap_theta": 0.0}])
+                                {"snap_theta": 0.0}, {"solve": "exact"}])
 def test_bad_world_settings_are_named(kw):
     with pytest.raises(ValueError, match=next(iter(kw))):
         SyntheticConfig(**kw)
@@ -148,3 +191,11 @@ def test_identification_stops_where_the_hand_reports_the_grasp_lost(modelo):
     held = identify(Dropping(SyntheticWorld(modelo, OBJ, SyntheticConfig(seed=0)), 99),
                     world.observe, modelo, OBJ, world.nominal, cfg)
     assert held.grasp_lost_at is None and held.iterations == 6
+
+
+def test_the_cli_offers_the_worlds_solves():
+    from vlr import synthetic
+    from vlr.commands import identify
+
+    assert identify.WORLD_SOLVES == synthetic.WORLD_SOLVES
+

@@ -51,6 +51,11 @@ __all__ = ["Trial", "SweepSpec", "load_sweep", "parse_seeds", "expand", "run_one
 # measured before pin it. (The joint stops' 100 -> 17 N m/rad of session 28 renamed the
 # trials of the files that pin 100; trials have been run under both ids since, so it stays.)
 ID_FORMER_DEFAULTS: dict[str, Any] = {"jitter_kernel": "gaussian"}
+# ... and those of one backend's setting, compared at the former value on that backend only,
+# so that the other backends' trials keep their ids: the synthetic world's action solve was
+# "loose" until session 42.
+ID_FORMER_BACKEND_DEFAULTS: dict[str, dict[str, Any]] = {
+    "synthetic": {"synthetic_solve": "loose"}}
 
 
 @dataclass(frozen=True)
@@ -67,7 +72,8 @@ class Trial:
         # Only settings that differ from the defaults: adding a setting to TrialSettings later
         # must not rename (and so rerun) the trials of an existing sweep. A default that
         # changed is compared at its former value, so the files that pin it keep their ids.
-        defaults = {**TrialSettings().to_dict(), **ID_FORMER_DEFAULTS}
+        defaults = {**TrialSettings().to_dict(), **ID_FORMER_DEFAULTS,
+                    **ID_FORMER_BACKEND_DEFAULTS.get(s.backend, {})}
         changed = {k: v for k, v in s.to_dict().items() if v != defaults.get(k)}
         blob = json.dumps({"case": self.case, **changed}, sort_keys=True)
         digest = hashlib.sha1(blob.encode()).hexdigest()[:8]

@@ -205,6 +205,10 @@ class TrialSettings:
         jitter_kernel: "log-springs" (the default), "log-scales", "gaussian", "copula",
             "copula-joints", "copula-scales" or "copula-joints-scales", the space of the
             filter's Liu-West draw (`vlr.filter.FilterConfig.jitter_kernel`).
+        synthetic_solve: synthetic only: how the world solves an action
+            (`vlr.synthetic.SyntheticConfig.solve`): "model" (the default since session 42,
+            as a filter particle does) or "loose" (before: 300 Newton iterations without
+            jump limits, which can end elsewhere than the particle's path).
         priors: {unknown spec: [low, high]} the uniform prior of an unknown in its SI unit
             (e.g. {"stiffness:thumb.distal": [0.01, 0.08]} N m/rad); an unknown not named
             keeps its default (`vlr.filter.parse_unknown`). Each must be among `unknowns`.
@@ -276,6 +280,7 @@ class TrialSettings:
     link_scaling: bool = False
     jitter_h: float | None = None
     jitter_kernel: str = "log-springs"
+    synthetic_solve: str = "model"
     noise_prior: tuple[float, float] | None = None
     priors: dict[str, tuple[float, float]] = field(default_factory=dict)
     prior_shape: str = "uniform"
@@ -330,6 +335,9 @@ class TrialSettings:
                 raise UserError(f"ramp_time {self.ramp_time} s must be in (0, 2]")
         if self.sigma_turn_deg and self.sigma_motion > 0:
             raise UserError("sigma_turn_deg and sigma_motion model the same error: set one")
+        if self.synthetic_solve != "model" and self.backend != "synthetic":
+            raise UserError(f"synthetic_solve {self.synthetic_solve!r} is the synthetic "
+                            f"world's: the {self.backend} world solves nothing")
         if self.true_stiffness and self.backend != "synthetic":
             raise UserError("true_stiffness is for the synthetic world only: in the sim, "
                             "give a true_hand whose finger has the other spring (e.g. "
@@ -447,6 +455,7 @@ class TrialSettings:
                 raise UserError(f"priors: {spec!r} {prior!r} must be [low, high] with low <= "
                                 "high, both finite")
         from vlr.filter import JITTER_KERNELS, PRIOR_SHAPES
+        from vlr.synthetic import WORLD_SOLVES
         if self.prior_shape not in PRIOR_SHAPES:
             raise bad("prior_shape", f"one of {', '.join(PRIOR_SHAPES)}")
         if not (is_int(self.unknown_warmup) and self.unknown_warmup >= 0):
@@ -467,6 +476,8 @@ class TrialSettings:
             raise bad("jitter_h", "a number in [0, 1) (or none: the filter's default)")
         if self.jitter_kernel not in JITTER_KERNELS:
             raise bad("jitter_kernel", " or ".join(JITTER_KERNELS))
+        if self.synthetic_solve not in WORLD_SOLVES:
+            raise bad("synthetic_solve", " or ".join(WORLD_SOLVES))
         for name in ("link_scaling", "spin_memory", "exact_cylinder"):
             if not isinstance(getattr(self, name), bool):
                 raise bad(name, "true or false")
@@ -704,7 +715,8 @@ def open_world(settings: TrialSettings) -> World:
     if settings.backend == "synthetic":
         true_model = (HandModel.from_spec(load_hand(settings.true_hand))
                       if settings.true_hand else model)
-        world_cfg = SyntheticConfig(seed=settings.seed, motion=motion)
+        world_cfg = SyntheticConfig(seed=settings.seed, motion=motion,
+                                    solve=settings.synthetic_solve)
         # The world holds the object as its spec has it, whatever the filter believes.
         world = SyntheticWorld(true_model, ObjectParams.from_spec(obj_spec), world_cfg,
                                nominal_model=model,

@@ -20,6 +20,8 @@ import numpy as np
 # (0.6 s); tests/test_copula.py checks that the two agree.
 JITTER_KERNELS = ("gaussian", "copula", "copula-joints", "copula-scales",
                   "copula-joints-scales", "log-scales", "log-springs")
+# `vlr.synthetic.WORLD_SOLVES`, spelt out for the same reason (tests/test_synthetic.py).
+WORLD_SOLVES = ("model", "loose")
 
 # Below this share of true joints inside the grasp prior's intervals (scored against the
 # sim's or the synthetic world's truth), the run's table says the guess missed the grasp.
@@ -167,6 +169,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jitter-h", type=float, default=None, metavar="H",
                    help="the filter's Liu-West bandwidth, in [0, 1) (default 0.4; "
                    "RESULTS.md section 5: narrower converges, confidently wrong)")
+    p.add_argument("--synthetic-solve", choices=WORLD_SOLVES, default="model",
+                   help="with --backend synthetic: how the world solves an action: as a "
+                   "filter particle does (model, the default), or in one 300-iteration solve "
+                   "without jump limits (loose, before session 42)")
     p.add_argument("--jitter-kernel", choices=JITTER_KERNELS, default="log-springs",
                    help="where the Liu-West draw is made: the springs (a joint's, the "
                    "tendon's) on their logarithms and the rest as they are (log-springs, the "
@@ -284,7 +290,8 @@ def run(args: argparse.Namespace) -> int:
         object_curvature=args.object_curvature,
         ramp_time=args.ramp_time, cone_return=args.cone_return,
         link_scaling=args.link_scaling, jitter_h=args.jitter_h,
-        jitter_kernel=args.jitter_kernel, noise_prior=args.noise_prior,
+        jitter_kernel=args.jitter_kernel, synthetic_solve=args.synthetic_solve,
+        noise_prior=args.noise_prior,
         priors=dict(args.prior), prior_shape=args.prior_shape,
         unknown_warmup=args.unknown_warmup, unknown_discount=args.unknown_discount,
         action_range_mm=args.action_range_mm, action_band_mm=args.action_band_mm)
