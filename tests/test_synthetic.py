@@ -151,7 +151,7 @@ def truth_particle_gaps(solve: str, actions: int = 21) -> np.ndarray:
 def test_a_particle_at_the_truth_follows_the_world_exactly():
     """The world solves an action as a filter particle does (`SyntheticConfig.solve`
     "model"), so the synthetic world has no model-world gap, even on a move the particle must
-    follow in steps. The former one-shot solve ("loose") ends 1.7 mm off on action 21 of
+    follow in steps. The former one-shot solve ("loose") ends 1.07 mm off on action 21 of
     this rolling grasp."""
     assert truth_particle_gaps("model").max() < 1e-9
     loose = truth_particle_gaps("loose")

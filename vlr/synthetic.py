@@ -66,9 +66,10 @@ class SyntheticConfig:
             a particle started at the truth predicts the world's next pose exactly. "loose"
             (before): one solve of 300 Newton iterations without jump limits, which ends
             elsewhere than the particle's followed path on a move that needs more than
-            `motion.max_iter` iterations: with rolling contacts, where the path matters, up
-            to 1.7 mm and 3 degrees of the POM (the toy block grasped at (-10, 15) degrees,
-            seed 0; docs/RESULTS.md 5, session 42). Either way an action the model's solve
+            `motion.max_iter` iterations: with rolling contacts, where the path matters, 7
+            of 40 actions 0.12-1.07 mm (up to 1.8 degrees) off (the toy block grasped at
+            (-10, 15) degrees, seed 0; docs/scripts/world_solve_gap.py, docs/RESULTS.md 5,
+            session 42). Either way an action the model's solve
             cannot make is made the loose way, and a path that jumps is a snap-through.
     """
 
@@ -250,11 +251,14 @@ class SyntheticWorld:
     def apply(self, delta: np.ndarray) -> np.ndarray:
         """Change the tendon commands by `delta` (N,) [m] and settle; returns the commands.
 
-        A joint turning more than `snap_theta` in one solve may still be a continuous move of
-        a compliant grasp: the action is then followed in `motion.follow_substeps` equal
-        steps, the filter's own test (`vlr.motion.MotionConfig.follow_substeps`), and a path
-        whose every step stays under `snap_theta` is accepted (its end: the configuration
-        continuity reaches). A path that still jumps is a snap-through."""
+        With `config.solve` "model" the action is first solved as a filter particle solves it
+        (`MotionModel.solve` from the previous commands); where that fails, or with "loose",
+        as follows. A joint turning more than `snap_theta` in one solve may still be a
+        continuous move of a compliant grasp: the action is then followed in
+        `motion.follow_substeps` equal steps, the filter's own test
+        (`vlr.motion.MotionConfig.follow_substeps`), and a path whose every step stays under
+        `snap_theta` is accepted (its end: the configuration continuity reaches). A path that
+        still jumps is a snap-through."""
         if self.state is None:
             raise RuntimeError("grasp() first")
         self.state = self._move(delta)

@@ -119,6 +119,8 @@ def main() -> None:
     late = rows[len(rows) // 2:]
     print(f"second half: truth beats the best particle on "
           f"{sum(r['ll_truth'] > r['ll_max'] for r in late)} of {len(late)} updates; "
+          f"the truth's log-likelihood above the median particle's by "
+          f"{np.mean([r['ll_truth'] - r['ll_median'] for r in late]):+.2f} per update; "
           f"median coverage {np.median([r['coverage'] for r in late]):.2f}; "
           f"largest shadow {max(r['shadow_mm'] for r in rows):.4f} mm")
 
