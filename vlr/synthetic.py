@@ -69,8 +69,8 @@ class SyntheticConfig:
             `motion.max_iter` iterations: with rolling contacts, where the path matters, 7
             of 40 actions 0.12-1.07 mm (up to 1.8 degrees) off (the toy block grasped at
             (-10, 15) degrees, seed 0; docs/scripts/world_solve_gap.py, docs/RESULTS.md 5,
-            session 42). Either way an action the model's solve
-            cannot make is made the loose way, and a path that jumps is a snap-through.
+            session 42). Either way an action the model's solve cannot make is made the
+            loose way, and a path that jumps is a snap-through.
     """
 
     seed: int = 0
