@@ -237,6 +237,9 @@ def test_contact_stiffness_anneal_stages_link_scaling_and_priors_reach_the_filte
     narrow = identify_config(TrialSettings(backend="synthetic", particles=50, jitter_h=0.1),
                              model).filter
     assert narrow.jitter_h == 0.1
+    assert default.ess_fraction == FilterConfig.ess_fraction
+    assert identify_config(TrialSettings(backend="synthetic", particles=50, ess_fraction=0.5),
+                           model).filter.ess_fraction == 0.5
     assert default.jitter_kernel == "log-springs" == FilterConfig.jitter_kernel
     assert identify_config(TrialSettings(backend="synthetic", particles=50,
                                          jitter_kernel="copula"),
@@ -257,6 +260,8 @@ def test_contact_stiffness_anneal_stages_link_scaling_and_priors_reach_the_filte
 (dict(link_scaling="yes"), "link_scaling 'yes'"),
                        (dict(jitter_h=1.0), "jitter_h 1.0"),
                        (dict(jitter_h="wide"), "jitter_h 'wide'"),
+                       (dict(ess_fraction=1.0), "ess_fraction 1.0"),
+                       (dict(ess_fraction="half"), "ess_fraction 'half'"),
                        (dict(jitter_kernel="box"), "jitter_kernel 'box'"),
                        (dict(contact_stiffness=0.0), "contact_stiffness 0.0"),
                        (dict(contact_stiffness="soft"), "contact_stiffness 'soft'"),

@@ -200,6 +200,8 @@ class TrialSettings:
         cone_return: with rolling, the sliding friction coefficient of the return map
             between solves (`vlr.motion.MotionConfig.cone_return`); None: off. Not with
             slide_friction or spin_friction (the friction in the energy already slides).
+        ess_fraction: the share of the particles tempering keeps as the effective sample
+            size of an update (`vlr.filter.FilterConfig.ess_fraction`); None: its default.
         jitter_h: the filter's Liu-West bandwidth (`vlr.filter.FilterConfig.jitter_h`);
             None: its default.
         jitter_kernel: "log-springs" (the default), "log-scales", "gaussian", "copula",
@@ -279,6 +281,7 @@ class TrialSettings:
     cone_return: float | None = None
     link_scaling: bool = False
     jitter_h: float | None = None
+    ess_fraction: float | None = None
     jitter_kernel: str = "log-springs"
     synthetic_solve: str = "model"
     noise_prior: tuple[float, float] | None = None
@@ -474,6 +477,10 @@ class TrialSettings:
         if self.jitter_h is not None and not (is_real(self.jitter_h)
                                               and 0 <= self.jitter_h < 1):
             raise bad("jitter_h", "a number in [0, 1) (or none: the filter's default)")
+        if self.ess_fraction is not None and not (is_real(self.ess_fraction)
+                                                  and 0 <= self.ess_fraction < 1):
+            raise bad("ess_fraction", "a number in [0, 1) (0: no tempering; or none: the "
+                      "filter's default)")
         if self.jitter_kernel not in JITTER_KERNELS:
             raise bad("jitter_kernel", " or ".join(JITTER_KERNELS))
         if self.synthetic_solve not in WORLD_SOLVES:
@@ -830,6 +837,8 @@ def identify_config(settings: TrialSettings, model):
                            else {"contact_spread": math.radians(settings.contact_spread_deg)}),
                         **({} if settings.jitter_h is None
                            else {"jitter_h": float(settings.jitter_h)}),
+                        **({} if settings.ess_fraction is None
+                           else {"ess_fraction": float(settings.ess_fraction)}),
                         jitter_kernel=settings.jitter_kernel,
                         observation=ObservationModel(sigma_pos=sp * 1e-3,
                                                      sigma_rot=float(np.radians(sr)),

@@ -169,6 +169,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--jitter-h", type=float, default=None, metavar="H",
                    help="the filter's Liu-West bandwidth, in [0, 1) (default 0.4; "
                    "RESULTS.md section 5: narrower converges, confidently wrong)")
+    p.add_argument("--ess-fraction", type=float, default=None, metavar="F",
+                   help="tempering keeps the effective sample size of an update at this "
+                   "share of the particles or more, in [0, 1) (default 0.1; 0: no tempering)")
     p.add_argument("--synthetic-solve", choices=WORLD_SOLVES, default="model",
                    help="with --backend synthetic: how the world solves an action: as a "
                    "filter particle does (model, the default), or in one 300-iteration solve "
@@ -290,6 +293,7 @@ def run(args: argparse.Namespace) -> int:
         object_curvature=args.object_curvature,
         ramp_time=args.ramp_time, cone_return=args.cone_return,
         link_scaling=args.link_scaling, jitter_h=args.jitter_h,
+        ess_fraction=args.ess_fraction,
         jitter_kernel=args.jitter_kernel, synthetic_solve=args.synthetic_solve,
         noise_prior=args.noise_prior,
         priors=dict(args.prior), prior_shape=args.prior_shape,
