@@ -165,6 +165,13 @@ def test_bad_world_settings_are_named(kw):
         SyntheticConfig(**kw)
 
 
+def test_a_grasp_guess_of_the_wrong_size_is_named(modelo):
+    from vlr.synthetic import nominal_grasp
+
+    with pytest.raises(ValueError, match=r"grasp_theta .*: give 2 angles .* or 6"):
+        nominal_grasp(modelo, OBJ, SyntheticConfig(grasp_theta=(-0.2, 0.3, 0.1)))
+
+
 def test_identification_stops_where_the_hand_reports_the_grasp_lost(modelo):
     """The VLR assumes a fingertip grasp (Eq. 8): once the hand says it is lost, the run
     stops before that action's update and says so."""
@@ -198,4 +205,3 @@ def test_the_cli_offers_the_worlds_solves():
     from vlr.commands import identify
 
     assert identify.WORLD_SOLVES == synthetic.WORLD_SOLVES
-

@@ -138,6 +138,9 @@ def nominal_grasp(model: HandModel, obj: ObjectParams, config: SyntheticConfig) 
     straightens the others), and a prior centred off-equilibrium loses most particles."""
     nf = model.n_fingers
     guess = np.asarray(config.grasp_theta, dtype=float)
+    if guess.size not in (model.n_joints, nf * model.n_joints):
+        raise ValueError(f"grasp_theta {np.round(guess, 4).tolist()}: give {model.n_joints} "
+                         f"angles (every finger alike) or {nf * model.n_joints} [rad]")
     theta = (guess.reshape(nf, model.n_joints) if guess.size == nf * model.n_joints
              else np.tile(guess, (nf, 1)))
     contact = np.tile(np.asarray(config.grasp_contact, dtype=float), (nf, 1))

@@ -68,6 +68,8 @@ def main() -> None:
     ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE")
     ap.add_argument("--csv", type=Path, default=None)
     args = ap.parse_args()
+    if args.csv is not None and not args.csv.parent.is_dir():
+        raise UserError(f"--csv {args.csv}: no folder {args.csv.parent}")
     settings = pick_settings(args.sweep, args.case, args.seed, args.set)
     rows: list[dict] = []
     box: dict = {}

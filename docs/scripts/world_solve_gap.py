@@ -14,10 +14,11 @@ import argparse
 
 import numpy as np
 
+from vlr.errors import UserError
 from vlr.kinematics import HandModel
 from vlr.motion import MotionModel, ObjectParams
 from vlr.observation import rotation_angle
-from vlr.spec import load_hand, load_object
+from vlr.spec import SpecError, load_hand, load_object
 from vlr.synthetic import WORLD_SOLVES, SyntheticConfig, SyntheticWorld, random_action
 from vlr.trial import TrialSettings
 
@@ -64,4 +65,7 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    try:
+        main()
+    except (UserError, SpecError, ValueError) as exc:  # a bad hand, object or grasp guess
+        raise SystemExit(f"error: {exc}") from None
