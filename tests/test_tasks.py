@@ -143,7 +143,14 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
            (["handwriting", "--seeds", "0-1", "--workers", "0"], "--workers"),
            (["handwriting", "--workers", "2"], "--seeds"),
            (["handwriting", "--seeds", "0-1", "--workers", "2", "--backend", "hardware",
-             "--config", "x.yaml"], "one hand")]
+             "--config", "x.yaml"], "one hand"),
+           (["handwriting", "--policy", "hold"], "MODULE:NAME"),
+           (["handwriting", "--policy", "no_such_module:hold"], "importing 'no_such_module'"),
+           (["handwriting", "--policy", "tasks.examples:no_such_policy"], "has no"),
+           (["handwriting", "--policy", "tasks.examples:ROWS"], "not callable"),
+           (["handwriting", "--policy", str(tmp_path / "missing.py") + ":make"], "no file"),
+           (["handwriting", "--policy", "tasks.examples:hold", "--alpha", "2"],
+            "do not apply")]
     for argv, message in bad:
         assert main(["task", *argv, "--out", str(tmp_path / "out")]) == 2, argv
         err = capsys.readouterr().err

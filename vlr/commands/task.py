@@ -1,4 +1,5 @@
-"""`vlr task handwriting|maze`: run the VLR baseline controller on a task environment.
+"""`vlr task handwriting|maze|cups`: run the VLR baseline controller, or your own policy, on a
+task environment.
 
 Writes into --out: `result.json` (the task metrics under `errors`, plus settings and timing)
 and `task.png` (the traced letters over the targets, the marble's path in the maze), both
@@ -9,6 +10,14 @@ atomically. Arguments, environment options and the output folder are checked bef
 once, in processes), then writes OUT/summary.md (mean and SD over seeds of the headline
 figures, beside the paper's) and OUT/summary.csv (one row per seed): issue #6's "five seeds
 per task from one command".
+
+`--policy MODULE:NAME` (or `FILE.py:NAME`) runs your policy instead of the baseline, with the
+same seeds, metrics, pictures and summary, so that the two compare row for row. NAME is a
+factory called once per episode, after the identification in reset, with the unwrapped
+environment (its filter `pf`, `commands`, `moves`, `observation` and `target`, as the
+baseline reads them); it returns the policy, a callable from the observation to the action
+(the three tendon changes [m]), as `env.unwrapped.baseline()` does. An action that is not
+three finite numbers ends the run with one line naming the policy, the step and the value.
 
 The environments live in the `tasks` package, which plugs in through the `vlr.tasks`
 entry-point group (pyproject.toml), as backends do: `vlr` never imports `tasks`, `sim` or
@@ -69,6 +78,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "(vlr.controller.ControllerConfig), e.g. secant_updates=True")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="an environment argument, e.g. word=SCI or letter_height=0.002")
+    p.add_argument("--policy", metavar="MODULE:NAME",
+                   help="your policy instead of the baseline: NAME(env) returns a callable "
+                   "observation -> action (module path, or FILE.py:NAME; docs/TASKS.md)")
     p.add_argument("--out", default=None, help="output folder (default runs/task-NAME)")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.set_defaults(func=run)
@@ -103,6 +115,7 @@ class SeedRun:
     seed: int
     out: Path
     quiet: bool
+    policy: str | None = None   # MODULE:NAME or /abs/FILE.py:NAME; None: the baseline
 
 
 def run(args: argparse.Namespace) -> int:
@@ -119,16 +132,17 @@ def run(args: argparse.Namespace) -> int:
         raise UserError("--workers with --backend hardware: there is one hand; run the seeds "
                         "one after another (--workers 1)")
     name, env_id, kwargs, changes, options = _checked(args)
+    policy = _checked_policy(args.policy, changes)
     out = Path(args.out or f"runs/task-{args.name}")
     _check_out(out)
     if seeds is None:
         result = run_seed(SeedRun(name, env_id, kwargs, changes, options, args.seed, out,
-                                  args.quiet))
+                                  args.quiet, policy))
         print(summary_line(result))
         print(f"wrote {out / 'result.json'}, {out / 'task.png'}")
         return 0
     runs = [SeedRun(name, env_id, kwargs, changes, options, s, out / f"seed-{s}",
-                    args.quiet or args.workers > 1) for s in seeds]
+                    args.quiet or args.workers > 1, policy) for s in seeds]
     return _run_seeds(runs, out, args.workers)
 
 
@@ -203,6 +217,70 @@ def _checked(args: argparse.Namespace) -> tuple[str, str, dict, dict, dict]:
     return args.name, env_id, kwargs, changes, options
 
 
+def _checked_policy(spec: str | None, changes: dict) -> str | None:
+    """`--policy` checked (it loads, and names a callable) and made absolute where it names
+    a file, so that worker processes find it too; None for the baseline. The baseline's
+    controller flags do not apply to another policy: given with one, they are refused."""
+    if spec is None:
+        return None
+    if changes:
+        raise UserError(f"--policy {spec!r} replaces the baseline controller, so its settings "
+                        f"({', '.join(sorted(changes))}) do not apply: leave them out")
+    where, sep, attr = spec.rpartition(":")
+    if not sep or not where or not attr:
+        raise UserError(f"--policy {spec!r}: expected MODULE:NAME or FILE.py:NAME")
+    if where.endswith(".py"):
+        path = Path(where).expanduser().resolve()
+        if not path.is_file():
+            raise UserError(f"--policy {spec!r}: no file {str(path)!r}")
+        spec = f"{path}:{attr}"
+    load_policy_factory(spec)
+    return spec
+
+
+def load_policy_factory(spec: str):
+    """The factory `spec` (MODULE:NAME or FILE.py:NAME) names; UserError naming the spec when
+    it does not import, has no such name, or names something that is not callable."""
+    import importlib
+    import importlib.util
+
+    where, _, attr = spec.rpartition(":")
+    try:
+        if where.endswith(".py"):
+            mod_spec = importlib.util.spec_from_file_location(
+                f"vlr_user_policy_{Path(where).stem}", where)
+            module = importlib.util.module_from_spec(mod_spec)
+            mod_spec.loader.exec_module(module)
+        else:
+            module = importlib.import_module(where)
+    except Exception as exc:   # noqa: BLE001 - the user's module: say what failed, in one line
+        raise UserError(f"--policy {spec!r}: importing {where!r} failed "
+                        f"({type(exc).__name__}: {exc})") from None
+    factory = getattr(module, attr, None)
+    if factory is None:
+        raise UserError(f"--policy {spec!r}: {where!r} has no {attr!r}")
+    if not callable(factory):
+        raise UserError(f"--policy {spec!r}: {attr!r} is not callable (a "
+                        f"{type(factory).__name__}); it must be a factory taking the "
+                        "environment")
+    return factory
+
+
+def _checked_action(action, spec: str, step: int):
+    """The policy's action as three finite floats [m]; UserError naming the policy, the step
+    and the value otherwise (not a reshape error from inside the environment)."""
+    import numpy as np
+
+    try:
+        a = np.asarray(action, dtype=float)
+    except (TypeError, ValueError):
+        a = None
+    if a is None or a.shape != (3,) or not np.all(np.isfinite(a)):
+        raise UserError(f"--policy {spec!r} returned {action!r} at step {step}: an action is "
+                        "the three tendon changes [m], finite numbers")
+    return a
+
+
 def _check_out(out: Path) -> None:
     """The run takes minutes: a folder that cannot be written fails now, not after it."""
     try:
@@ -214,8 +292,8 @@ def _check_out(out: Path) -> None:
 
 
 def run_seed(job: SeedRun) -> dict:
-    """Reset (identification), run the baseline policy to the episode's end, write
-    `result.json` and `task.png` into `job.out`; return the result."""
+    """Reset (identification), run the baseline policy (or `job.policy`) to the episode's
+    end, write `result.json` and `task.png` into `job.out`; return the result."""
     import gymnasium as gym
 
     from vlr.io import write_json_atomic
@@ -233,14 +311,24 @@ def run_seed(job: SeedRun) -> dict:
             raise UserError(f"the identification in reset failed ({exc}); try more "
                             "--particles") from None
         t_identified = time.perf_counter()
-        policy = env.unwrapped.baseline(**job.changes)   # the policy ships with the env
+        if job.policy is None:
+            policy = env.unwrapped.baseline(**job.changes)   # the policy ships with the env
+        else:
+            policy = load_policy_factory(job.policy)(env.unwrapped)
+            if not callable(policy):
+                raise UserError(f"--policy {job.policy!r}: the factory returned "
+                                f"{policy!r}, not a policy (a callable observation -> "
+                                "action)")
         if not job.quiet:
             from tqdm import tqdm
 
             bar = tqdm(desc=job.name, unit="move")
         steps = 0
         while True:
-            obs, reward, terminated, truncated, info = env.step(policy(obs))
+            action = policy(obs)
+            if job.policy is not None:
+                action = _checked_action(action, job.policy, steps)
+            obs, reward, terminated, truncated, info = env.step(action)
             steps += 1
             if bar is not None:
                 bar.update(1)
@@ -253,7 +341,9 @@ def run_seed(job: SeedRun) -> dict:
         result = {"task": job.name, "env": job.env_id, "backend": job.kwargs["backend"],
                   "seed": job.seed, "particles": job.kwargs["particles"],
                   "options": job.options,
-                  "controller": dataclasses.asdict(policy.config),
+                  "policy": job.policy or "baseline",
+                  **({"controller": dataclasses.asdict(policy.config)}
+                     if job.policy is None else {}),
                   **task.metrics(),
                   "identification": _identification(task.identification),
                   "steps": steps,
@@ -304,7 +394,8 @@ def _run_seeds(runs: list[SeedRun], out: Path, workers: int) -> int:
             for f in as_completed(futures):
                 exc = f.exception()
                 done(futures[f], None if exc else f.result(), exc)
-    title = f"vlr task {runs[0].name}, seeds {','.join(str(j.seed) for j in runs)}"
+    title = (f"vlr task {runs[0].name}, seeds {','.join(str(j.seed) for j in runs)}, "
+             f"policy {runs[0].policy or 'baseline'}")
     write_text_atomic(out / "summary.md", summary_markdown(results, failed, title))
     if results:
         write_text_atomic(out / "summary.csv", summary_csv(results))
