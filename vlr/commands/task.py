@@ -11,9 +11,9 @@ once, in processes), then writes OUT/summary.md (mean and SD over seeds of the h
 figures, beside the paper's) and OUT/summary.csv (one row per seed): issue #6's "five seeds
 per task from one command".
 
-`--policy MODULE:NAME` (or `FILE.py:NAME`) runs your policy instead of the baseline, with the
-same seeds, metrics, pictures and summary, so that the two compare row for row. NAME is a
-factory called once per episode, after the identification in reset, with the unwrapped
+`--policy MODULE:NAME` (or `FILE.py:NAME`, whose folder goes on the import path as a
+script's does) runs your policy instead of the baseline, with the same seeds, metrics,
+pictures and summary, so that the two compare row for row. NAME is a factory called once per episode, after the identification in reset, with the unwrapped
 environment (its filter `pf`, `commands`, `moves`, `observation` and `target`, as the
 baseline reads them); it returns the policy, a callable from the observation to the action
 (the three tendon changes [m]), as `env.unwrapped.baseline()` does. An action that is not
@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
+import functools
 import math
 import os
 import time
@@ -238,15 +239,22 @@ def _checked_policy(spec: str | None, changes: dict) -> str | None:
     return spec
 
 
+@functools.cache
 def load_policy_factory(spec: str):
-    """The factory `spec` (MODULE:NAME or FILE.py:NAME) names; UserError naming the spec when
-    it does not import, has no such name, or names something that is not callable."""
+    """The factory `spec` (MODULE:NAME or FILE.py:NAME) names, imported once per process; a
+    file's folder goes on the import path first, as for a script, so that it may import its
+    neighbours. UserError naming the spec when it does not import, has no such name, or
+    names something that is not callable."""
     import importlib
     import importlib.util
+    import sys
 
     where, _, attr = spec.rpartition(":")
     try:
         if where.endswith(".py"):
+            folder = str(Path(where).parent)
+            if folder not in sys.path:
+                sys.path.insert(0, folder)
             mod_spec = importlib.util.spec_from_file_location(
                 f"vlr_user_policy_{Path(where).stem}", where)
             module = importlib.util.module_from_spec(mod_spec)
