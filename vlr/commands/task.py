@@ -13,11 +13,12 @@ per task from one command".
 
 `--policy MODULE:NAME` (or `FILE.py:NAME`, whose folder goes on the import path as a
 script's does) runs your policy instead of the baseline, with the same seeds, metrics,
-pictures and summary, so that the two compare row for row. NAME is a factory called once per episode, after the identification in reset, with the unwrapped
-environment (its filter `pf`, `commands`, `moves`, `observation` and `target`, as the
-baseline reads them); it returns the policy, a callable from the observation to the action
-(the three tendon changes [m]), as `env.unwrapped.baseline()` does. An action that is not
-three finite numbers ends the run with one line naming the policy, the step and the value.
+pictures and summary, so that the two compare row for row. NAME is a factory called once
+per episode, after the identification in reset, with the unwrapped environment (its filter
+`pf`, `commands`, `moves`, `observation` and `target`, as the baseline reads them); it
+returns the policy, a callable from the observation to the action (the three tendon changes
+[m]), as `env.unwrapped.baseline()` does. An action that is not three finite numbers ends
+the run with one line naming the policy, the step and the value.
 
 The environments live in the `tasks` package, which plugs in through the `vlr.tasks`
 entry-point group (pyproject.toml), as backends do: `vlr` never imports `tasks`, `sim` or
