@@ -107,6 +107,23 @@ def test_task_summary_names_a_failed_seed():
     assert "seed 3 failed: GraspError" in md
 
 
+def test_task_summary_keeps_each_policy_on_its_own_rows():
+    from vlr.task_report import summarize, summary_csv
+
+    def run(seed, error, policy=None):
+        r = {"task": "maze", "seed": seed, "errors": {"orientation_deg_mean": error},
+             "solved": True}
+        return r if policy is None else {**r, "policy": policy}
+
+    rows = summarize([run(0, 0.2), run(1, 0.4), run(0, 3.0, "/home/me/mine.py:make")])
+    assert len(rows) == 2
+    assert rows[0].startswith("| maze | 0,1 | orientation error 0.30 +- 0.10 deg"), rows
+    assert rows[1].startswith("| maze, policy mine.py:make | 0 | orientation error 3.00"), rows
+    csv = summary_csv([run(0, 0.2), run(0, 3.0, "tasks.examples:hold")]).splitlines()
+    assert csv[0].endswith(",policy") and csv[1].endswith(",baseline")
+    assert csv[2].endswith(",tasks.examples:hold")
+
+
 def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
     """One line each (exit 2), before the sim opens, and nothing written."""
     from vlr.cli import main

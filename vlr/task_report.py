@@ -11,11 +11,13 @@ from __future__ import annotations
 
 import csv
 import io
+from pathlib import PurePath
 from typing import Any
 
 import numpy as np
 
-__all__ = ["HEADLINES", "PAPER", "summarize", "summary_markdown", "summary_csv"]
+__all__ = ["HEADLINES", "PAPER", "policy_label", "summarize", "summary_markdown",
+           "summary_csv"]
 
 # Headline figures per task: (key in result.json "errors", label, unit).
 HEADLINES: dict[str, list[tuple[str, str, str]]] = {
@@ -49,17 +51,31 @@ def _successes(task: str, rs: list[dict[str, Any]]) -> str:
     return out + (f", grasp lost in {lost}" if lost else "")
 
 
+def policy_label(spec: str) -> str:
+    """A run's policy as the summary names it: "baseline", a module's `MODULE:NAME`, a
+    file's `FILE.py:NAME` without its folder."""
+    where, sep, attr = spec.rpartition(":")
+    return f"{PurePath(where).name}:{attr}" if sep else spec
+
+
 def summarize(results: list[dict[str, Any]]) -> list[str]:
     """Markdown rows: task | seeds | figure (mean +- SD over runs, and per-run values) |
-    successes. One row per headline figure of each task present."""
+    successes. One row per headline figure of each task and policy present (`vlr task
+    --policy`; the task column names a policy other than the baseline), so that runs of
+    two policies are never pooled."""
     rows = []
-    for task in sorted({r["task"] for r in results}):
-        rs = sorted((r for r in results if r["task"] == task), key=lambda r: r["seed"])
+    groups = sorted({(r["task"], r.get("policy", "baseline")) for r in results},
+                    key=lambda g: (g[0], g[1] != "baseline", g[1]))
+    for task, policy in groups:
+        rs = sorted((r for r in results
+                     if r["task"] == task and r.get("policy", "baseline") == policy),
+                    key=lambda r: r["seed"])
         seeds = ",".join(str(r["seed"]) for r in rs)
+        name = task if policy == "baseline" else f"{task}, policy {policy_label(policy)}"
         for key, label, unit in HEADLINES.get(task, []):
             v = np.array([r["errors"][key] for r in rs], dtype=float)
             per = ", ".join(f"{x:.2f}" for x in v)
-            rows.append(f"| {task} | {seeds} | {label} {v.mean():.2f} +- {v.std():.2f} {unit} "
+            rows.append(f"| {name} | {seeds} | {label} {v.mean():.2f} +- {v.std():.2f} {unit} "
                         f"({per}) | {_successes(task, rs)} |")
     return rows
 
@@ -83,15 +99,18 @@ def summary_markdown(results: list[dict[str, Any]], failed: dict[int, str] | Non
 
 
 def summary_csv(results: list[dict[str, Any]]) -> str:
-    """One row per run: task, seed, every float in `errors`, and the successes' counts."""
+    """One row per run: task, seed, every float in `errors`, the successes' counts, the wall
+    time and the policy."""
     keys = sorted({k for r in results for k, v in r.get("errors", {}).items()
                    if isinstance(v, int | float) and not isinstance(v, bool)})
     extra = ["solved", "cups_stacked", "waypoints_reached", "waypoints_scored", "grasp_lost"]
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["task", "seed", *keys, *extra, "wall_s"])
-    for r in sorted(results, key=lambda r: (r["task"], r["seed"])):
+    w.writerow(["task", "seed", *keys, *extra, "wall_s", "policy"])
+    for r in sorted(results, key=lambda r: (r["task"], r.get("policy", "baseline"),
+                                            r["seed"])):
         e = r.get("errors", {})
         w.writerow([r["task"], r["seed"], *[e.get(k, "") for k in keys],
-                    *[r.get(k, "") for k in extra], r.get("timing", {}).get("wall_s", "")])
+                    *[r.get(k, "") for k in extra], r.get("timing", {}).get("wall_s", ""),
+                    r.get("policy", "baseline")])
     return buf.getvalue()
