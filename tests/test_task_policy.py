@@ -56,8 +56,9 @@ def test_a_users_policy_file_runs_in_place_of_the_baseline(tmp_path):
 
 
 def test_the_example_policies_run_and_name_themselves_in_the_summary(tmp_path):
-    """`tasks.examples`: hold never moves the tendons; camera_only steps from the camera's
-    fit of the identification's moves, so its commands leave the task's centre."""
+    """`tasks.examples`: hold runs through `vlr task --seeds` and its summary names it;
+    camera_only, given the identification's moves, returns a finite step that is not zero
+    (it steps from the camera's fit of those moves)."""
     out = tmp_path / "hold"
     assert main(["task", "handwriting", *TINY, "--seeds", "0", "--policy",
                  "tasks.examples:hold", "--out", str(out)]) == 0
