@@ -386,9 +386,53 @@ class SimHand:
 
 
 def open_hand(*, object: str = "apple", hand: str = "modelo", seed: int = 0,
-              config: str | None = None, **options) -> SimHand:
-    """Backend factory for the CLI (`--backend sim`)."""
+              **options) -> SimHand:
+    """The sim's hand factory (`vlr.backends.open_hand("sim", ...)`): `options` are
+    `SimOptions` fields."""
     return SimHand(object=object, hand=hand, seed=seed, options=SimOptions(**options))
+
+
+@dataclass(frozen=True)
+class SimWorldOptions:
+    """The sim's `world.options` for an identification (`vlr.backends`).
+
+    Attributes:
+        ramp_time: how long the sim takes to make each command change [s]
+            (`SimOptions.ramp_time`): the hardware backend's default move, 5 goal positions
+            20 ms apart (`hardware.config.MotionConfig`), so that the sim moves as the real
+            hand is moved. At 50 ms the fingers, whose springs and damping settle in about
+            as long, lag the command, and a contact can slide where the quasi-static model
+            rolls (docs/DECISIONS.md).
+        tension_noise_n: the standard deviation of the sim's tension readings [N]
+            (`SimOptions.tension_noise_n`); 0: exact (the series spring's).
+    """
+
+    ramp_time: float = 0.1
+    tension_noise_n: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not (np.isfinite(self.ramp_time) and 0 < self.ramp_time <= 2.0):
+            raise ValueError(f"ramp_time {self.ramp_time} s must be in (0, 2]")
+        if not (np.isfinite(self.tension_noise_n) and self.tension_noise_n >= 0):
+            raise ValueError(f"tension_noise_n {self.tension_noise_n} N must be >= 0")
+
+
+def _backend():
+    from vlr.backends import Backend
+
+    # What each default measured, and against what: docs/DECISIONS.md. Rolling contacts and
+    # the surface contact prior are the dataclasses' own defaults (the real hand's too).
+    return Backend(
+        name="sim", options=SimWorldOptions, open_hand=open_hand,
+        defaults={"filter.observation.sigma_pos_mm": 0.2,
+                  "filter.observation.sigma_rot_deg": 0.4,
+                  "filter.observation.sigma_turn_deg": 1.0,
+                  "filter.motion.limit_stiffness": 17.0,
+                  "filter.guess_theta_deg": [-10.0, 15.0],
+                  "filter.theta_spread_deg": 10.0})
+
+
+BACKEND = _backend()
 
 
 def scoring_truth(hand: SimHand):

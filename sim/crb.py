@@ -1,16 +1,16 @@
 """`vlr crb`: how narrow an honest filter's intervals can be, from the simulator's true grasp
-(issue #5: "within 15 iterations"; `vlr.information`).
+(`vlr.information`).
 
-The paper's convergence criterion is the mean 95% interval of the joint angles under 2
-degrees (METHOD.md 3). This tool linearises the filter's OWN model (the one `vlr identify`
-builds for the same settings: its prior, unknowns and likelihood scales) at the simulator's
-true configuration after the grasp, follows the actions `vlr identify --seed` takes (or,
-with `--candidates`, an oracle that picks each action to narrow the bound the most; with
-`--replay`, the actions a finished trial took, e.g. active exploration's), and
+The paper's convergence criterion is the mean 95% interval of the joint angles under 2 degrees
+(docs/METHOD.md 3), met in 15 actions on the real hand. This tool linearises the filter's OWN
+model (the one `vlr identify` builds for the same settings: its prior, unknowns and likelihood
+scales) at the simulator's true configuration after the grasp, follows the actions `vlr identify
+--seed` takes (or, with `--candidates`, an oracle that picks each action to narrow the bound the
+most; with `--replay`, the actions a finished trial took, e.g. active exploration's), and
 reports the Bayesian Cramér-Rao floor of that measure after each action, at the likelihood's
 scales and at the camera's own accuracy. It needs a world with ground truth, the sim or the
-synthetic world (where the model is the world, so the floor is what a perfect model allows):
-it reads the truth to choose the linearisation point; the estimator never runs it.
+synthetic world (where the model is the world, so the floor is what a perfect model allows): it
+reads the truth to choose the linearisation point; the estimator never runs it.
 """
 
 from __future__ import annotations
@@ -18,24 +18,27 @@ from __future__ import annotations
 import argparse
 import math
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
 from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
 from vlr.hand import GraspError, report_commands
-from vlr.trial import TrialSettings
 
 __all__ = ["CrbSettings", "crb_report", "format_report", "register", "CAMERA_SIGMA"]
 
-# The rendered camera's pose accuracy (METHOD.md 8.2: 0.04-0.06 mm and 0.15-0.25 degree at
+# The rendered camera's pose accuracy (docs/CAMERA.md: 0.04-0.06 mm and 0.15-0.25 degree at
 # 640x480): the scales of a model with no error at all.
 CAMERA_SIGMA = (0.05, 0.2)
 
 
-def _sim_trial() -> TrialSettings:
-    return TrialSettings(backend="sim", particles=1000, max_iterations=20)
+def _sim_trial():
+    from vlr.settings import load_settings
+
+    return load_settings({"world.backend": "sim", "filter.particles": 1000,
+                          "loop.max_iterations": 20})
 
 
 @dataclass(frozen=True)
@@ -43,15 +46,15 @@ class CrbSettings:
     """One bound: the trial it bounds and the bound's own settings.
 
     Attributes:
-        trial: the trial (`vlr.trial.TrialSettings`, backend "sim" or "synthetic"): its
-            object, hands,
-            unknowns, prior, likelihood scales and seed (its actions); `max_iterations` is
-            the number of actions. Its particle count does not matter.
+        trial: the trial's settings tree (`vlr.settings.Settings`, backend "sim" or
+            "synthetic"): its object, hands, unknowns, prior, likelihood scales and seed
+            (its actions); `loop.max_iterations` is the number of actions. Its particle
+            count does not matter.
         candidates: 0 follows `vlr identify`'s random actions; K > 0 picks each action among
             K random candidates as the one that narrows the bound most (an oracle: it knows
             the truth, so no filter can choose better from those candidates).
         relative_step: central-difference step over each prior spread (`vlr.information`).
-        target_deg: the convergence criterion [deg] (METHOD.md 3).
+        target_deg: the convergence criterion [deg] (docs/METHOD.md 3).
         budget: the actions at which the scales that would just meet the criterion are
             reported (the paper's 15.1 iterations).
         replay: the tendon commands [m] a trial reported, the grasp's first
@@ -59,7 +62,7 @@ class CrbSettings:
             these actions instead (`replay_commands`).
     """
 
-    trial: TrialSettings = field(default_factory=_sim_trial)
+    trial: Any = field(default_factory=_sim_trial)
     candidates: int = 0
     relative_step: float = 0.02
     target_deg: float = 2.0
@@ -67,12 +70,9 @@ class CrbSettings:
     replay: tuple[tuple[float, ...], ...] = ()
 
     def __post_init__(self) -> None:
-        if self.trial.backend not in ("sim", "synthetic"):
-            raise UserError(f"backend {self.trial.backend!r}: the bound is linearised at the "
-                            "true grasp; use the sim or the synthetic world")
-        if "noise" in self.trial.unknowns:
-            raise UserError("unknown 'noise': the bound is taken at the likelihood's given "
-                            "scales (--sigma-*), not at an identified factor on them; drop it")
+        if self.trial.world.backend not in ("sim", "synthetic"):
+            raise UserError(f"backend {self.trial.world.backend!r}: the bound is linearised "
+                            "at the true grasp; use the sim or the synthetic world")
         if not isinstance(self.candidates, int) or self.candidates < 0:
             raise UserError(f"candidates {self.candidates!r} must be an integer >= 0")
         if not 0 < self.relative_step < 0.5:
@@ -89,11 +89,10 @@ class CrbSettings:
     def actions(self) -> int:
         if self.replay:
             return len(self.replay) - 1
-        return self.trial.max_iterations
+        return self.trial.loop.max_iterations
 
 
-def replay_commands(record: dict, where: str) -> tuple[TrialSettings,
-                                                       tuple[tuple[float, ...], ...]]:
+def replay_commands(record: dict, where: str) -> tuple[Any, tuple[tuple[float, ...], ...]]:
     """The settings and the reported tendon commands [m] of a finished trial's record: a
     `vlr sweep` trial file (its "settings" and its result's `commands_mm_by_iteration`) or
     the `result.json` of `vlr identify --out` (both at its top level)."""
@@ -110,24 +109,13 @@ def replay_commands(record: dict, where: str) -> tuple[TrialSettings,
         u = np.empty(0)
     if u.ndim != 2 or not np.isfinite(u).all():
         raise UserError(f"{where}: commands_mm_by_iteration must be rows of finite numbers")
-    if settings.get("limit_stiffness") is None:
-        # Replay at the joint stops the trial ran with: its record says since session 28;
-        # before, every backend's were the model's 100 (the sim's default is now 17).
-        from vlr.motion import MotionConfig
+    from vlr.settings import load_settings
 
-        ran = result.get("limit_stiffness")
-        if ran is not None and not isinstance(ran, int | float):
-            raise UserError(f"{where}: result limit_stiffness {ran!r} is not a number")
-        settings = {**settings, "limit_stiffness": float(ran) if ran is not None
-                    else MotionConfig.limit_stiffness}
-    if settings.get("backend") == "sim" and settings.get("ramp_time") is None:
-        # Replay in the sim the trial ran in: its record says since session 30; before,
-        # the sim ramped every command change over 50 ms (vlr identify's default is now 0.1).
-        ran = result.get("ramp_time", 0.05)
-        if not isinstance(ran, int | float) or isinstance(ran, bool):
-            raise UserError(f"{where}: result ramp_time {ran!r} is not a number")
-        settings = {**settings, "ramp_time": float(ran)}
-    return TrialSettings.from_dict(settings), tuple(map(tuple, u * 1e-3))
+    try:
+        trial = load_settings(settings)
+    except UserError as exc:
+        raise UserError(f"{where}: {exc}") from None
+    return trial, tuple(map(tuple, u * 1e-3))
 
 
 def _bound(trace, sigma: tuple[float, float, float, float]):
@@ -158,16 +146,16 @@ def crb_report(s: CrbSettings) -> dict:
     """Grasp in the sim, then follow the actions (module docstring); the bound after each."""
     from vlr.filter import ParticleFilter
     from vlr.information import InformationTrace, truth_vector
-    from vlr.trial import identify_config, open_world
+    from vlr.world import open_world
 
     t_start = time.perf_counter()
     ts = s.trial
+    ob = ts.filter.observation
     world = open_world(ts)
     try:
-        cfg = identify_config(ts, world.model)
-        pf = ParticleFilter(world.model, world.obj, cfg.filter)
-        sigma = (ts.sigma[0] * 1e-3, math.radians(ts.sigma[1]), math.radians(ts.turn_deg),
-                 float(ts.sigma_tension_n))
+        pf = ParticleFilter(world.model, world.obj, ts.filter, ts.seed)
+        sigma = (pf.obs_model.sigma_pos, pf.obs_model.sigma_rot, pf.obs_model.sigma_turn,
+                 pf.obs_model.sigma_tension)
         # The camera's pose accuracy; tensions, where observed, at the trial's own scale.
         camera = (CAMERA_SIGMA[0] * 1e-3, math.radians(CAMERA_SIGMA[1]), 0.0, sigma[3])
         u = report_commands(world.world.grasp())
@@ -178,13 +166,13 @@ def crb_report(s: CrbSettings) -> dict:
         truth = world.truth()
         if (any(u.kind == "curvature" for u in pf.unknowns)
                 and getattr(truth, "surface_curvature", None) is None):
-            raise UserError(f"unknown 'curvature': object {ts.object!r} is a mesh, whose "
+            raise UserError(f"unknown 'curvature': object {ts.world.object!r} is a mesh, whose "
                             "curvature the sim does not know; the bound needs its true value")
         trace = InformationTrace(pf, truth_vector(pf, truth), truth.position, truth.rotation,
                                  u, s.relative_step)
         rng = np.random.default_rng(ts.seed + 1)  # vlr identify's action stream
-        explore = ExplorationRange(cfg.action_range[0], cfg.action_range[1],
-                                   max(cfg.action_band, cfg.action_range[1]))
+        lo, hi = (v * 1e-3 for v in ts.loop.action_range_mm)
+        explore = ExplorationRange(lo, hi, max(ts.loop.action_band_mm * 1e-3, hi))
         center = u.copy()
         rows = [_row(trace, sigma, camera)]
         scale_at_budget = None
@@ -221,13 +209,13 @@ def crb_report(s: CrbSettings) -> dict:
         return next((r["actions"] for r in rows if r[key] < s.target_deg), None)
 
     return {
-        "object": ts.object, "hand": ts.hand, "true_hand": ts.true_hand,
-        "unknowns": list(ts.unknowns), "seed": ts.seed,
+        "object": ts.world.object, "hand": ts.world.hand, "true_hand": ts.world.true_hand,
+        "unknowns": list(ts.filter.unknowns), "seed": ts.seed,
         "actions": ("replay" if s.replay else "oracle" if s.candidates else "random"),
         "candidates": s.candidates,
-        "sigma_pos_mm": ts.sigma[0], "sigma_rot_deg": ts.sigma[1],
-        "sigma_turn_deg": ts.turn_deg, "sigma_tension_n": ts.sigma_tension_n,
-        "camera_sigma": list(CAMERA_SIGMA), "prior_spread_deg": ts.grasp_guess[1],
+        "sigma_pos_mm": ob.sigma_pos_mm, "sigma_rot_deg": ob.sigma_rot_deg,
+        "sigma_turn_deg": ob.sigma_turn_deg, "sigma_tension_n": ob.sigma_tension_n,
+        "camera_sigma": list(CAMERA_SIGMA), "prior_spread_deg": ts.filter.theta_spread_deg,
         "relative_step": s.relative_step, "target_deg": s.target_deg,
         "grasp_lost_at": lost,
         "first_under_target": first_under("mean_width_deg"),
@@ -360,69 +348,46 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--candidates", type=int, default=0, metavar="K",
                    help="oracle actions: each the best of K random candidates (default 0: "
                    "vlr identify's random actions)")
-    p.add_argument("--sigma-pos-mm", type=float, default=None)
-    p.add_argument("--sigma-rot-deg", type=float, default=None)
-    p.add_argument("--sigma-turn", type=float, default=None, metavar="DEG",
-                   help="the likelihood's turn term (as vlr identify --sigma-turn)")
-    p.add_argument("--sigma-tension", type=float, default=0.0, metavar="N",
-                   help="tendon tensions observed at this scale (as vlr identify "
-                   "--sigma-tension; 0: not observed)")
-    p.add_argument("--nominal-theta-deg", type=float, nargs="+", default=None)
-    p.add_argument("--prior-spread-deg", type=float, default=None)
-    p.add_argument("--contact-spread-deg", type=float, default=None,
-                   help="the contact angles' prior spread (as vlr identify)")
-    p.add_argument("--action-range-mm", type=float, nargs=2, default=None,
-                   metavar=("LOW", "HIGH"), help="as vlr identify (default 0.2 0.4)")
-    p.add_argument("--action-band-mm", type=float, default=None, metavar="B",
-                   help="as vlr identify (default 0.4)")
-    p.add_argument("--slide-friction", type=float, default=None, metavar="MU",
-                   help="the filter model's pads' sliding friction (as vlr identify)")
-    p.add_argument("--limit-stiffness", type=float, default=None, metavar="K_LIM",
-                   help="the model's joint stops [N m/rad] (default: a --sweep file's or a "
-                   "--replay record's own, else vlr identify's: the sim's 17 since session "
-                   "28, 100 before)")
-    p.add_argument("--spin-friction", type=float, default=0.0, metavar="MU_T",
-                   help="the filter model's pads' torsional friction [m] (as vlr identify)")
-    p.add_argument("--ramp-time", type=float, default=None, metavar="S",
-                   help="how long the sim takes to make each command change [s] (default: "
-                   "a --sweep file's or a --replay record's own, else vlr identify's: 0.1 "
-                   "since session 30, 0.05 before)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="any setting of the trial, as `vlr identify --set` (e.g. "
+                   "filter.observation.sigma_turn_deg=0.5); with --sweep or --replay, on top "
+                   "of theirs")
     p.add_argument("--relative-step", type=float, default=0.02,
                    help="finite-difference step over each prior spread (default 0.02)")
     p.add_argument("--json", default=None, metavar="FILE", help="write the report as JSON")
     p.set_defaults(func=_main)
 
 
-def _trials(args: argparse.Namespace) -> list[tuple[str, TrialSettings]]:
+def _overrides(args: argparse.Namespace) -> dict:
+    from vlr.settings import parse_assignment
+
+    return {**dict(parse_assignment(t) for t in args.set), "filter.particles": 1000}
+
+
+def _trials(args: argparse.Namespace) -> list[tuple[str, Any]]:
+    from vlr.settings import apply_layer, load_settings
     from vlr.sweep import expand, load_sweep
 
     if args.actions < 1:
         raise UserError(f"--actions {args.actions} must be >= 1")
     if args.sweep:
-        return [(t.case, replace(t.settings, particles=1000,
-                                 **_stops(args.limit_stiffness, args.ramp_time)))
+        return [(t.case, apply_layer(t.settings, _overrides(args)))
                 for t in expand(load_sweep(args.sweep))]
-    return [("trial", TrialSettings(
-        backend="sim", object=args.object, hand=args.hand, true_hand=args.true_hand,
-        unknowns=tuple(args.unknown), seed=args.seed, particles=1000,
-        max_iterations=args.actions, sigma_pos_mm=args.sigma_pos_mm,
-        sigma_rot_deg=args.sigma_rot_deg, sigma_turn_deg=args.sigma_turn,
-        sigma_tension_n=args.sigma_tension,
-        nominal_theta_deg=tuple(args.nominal_theta_deg) if args.nominal_theta_deg else None,
-        prior_spread_deg=args.prior_spread_deg, contact_spread_deg=args.contact_spread_deg,
-        slide_friction=args.slide_friction,
-        spin_friction=args.spin_friction, action_range_mm=args.action_range_mm,
-        action_band_mm=args.action_band_mm, limit_stiffness=args.limit_stiffness,
-        ramp_time=args.ramp_time))]
+    return [("trial", load_settings({
+        "world.backend": "sim", "world.object": args.object, "world.hand": args.hand,
+        "world.true_hand": args.true_hand, "filter.unknowns": list(args.unknown),
+        "seed": args.seed, "loop.max_iterations": args.actions}, _overrides(args)))]
 
 
-def _replays(paths: list[str]) -> list[tuple[str, TrialSettings, tuple]]:
+def _replays(args: argparse.Namespace) -> list[tuple[str, Any, tuple]]:
     """(case, settings, commands) of each trial file (`replay_commands`)."""
     import json
     from pathlib import Path
 
+    from vlr.settings import apply_layer
+
     out = []
-    for path in paths:
+    for path in args.replay:
         try:
             record = json.loads(Path(path).read_text())
         except FileNotFoundError:
@@ -432,15 +397,8 @@ def _replays(paths: list[str]) -> list[tuple[str, TrialSettings, tuple]]:
         if not isinstance(record, dict):
             raise UserError(f"--replay {path}: not a trial record")
         t, u = replay_commands(record, f"--replay {path}")
-        out.append((str(record.get("case", "trial")), replace(t, particles=1000), u))
+        out.append((str(record.get("case", "trial")), apply_layer(t, _overrides(args)), u))
     return out
-
-
-def _stops(limit_stiffness: float | None, ramp_time: float | None = None) -> dict:
-    """`--limit-stiffness` and `--ramp-time` as settings overrides (none given: the file's
-    or the record's own)."""
-    out = {} if limit_stiffness is None else {"limit_stiffness": limit_stiffness}
-    return out if ramp_time is None else {**out, "ramp_time": ramp_time}
 
 
 def _main(args: argparse.Namespace) -> int:
@@ -453,11 +411,9 @@ def _main(args: argparse.Namespace) -> int:
     if args.replay:
         if args.sweep:
             raise UserError("give --sweep or --replay, not both")
-        settings = [(case, CrbSettings(trial=replace(t, **_stops(args.limit_stiffness,
-                                                                   args.ramp_time)),
-                                       candidates=args.candidates,
+        settings = [(case, CrbSettings(trial=t, candidates=args.candidates,
                                        relative_step=args.relative_step, replay=u))
-                    for case, t, u in _replays(args.replay)]
+                    for case, t, u in _replays(args)]
     else:
         settings = [(case, CrbSettings(trial=t, candidates=args.candidates,
                                        relative_step=args.relative_step))

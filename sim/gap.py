@@ -1,5 +1,5 @@
-"""`vlr gap`: the model-world gap, measured from the simulator's true state (METHOD.md 8.1,
-issue 5).
+"""The model-world gap, measured from the simulator's true state (docs/METHOD.md 8.1; the
+command is `vlr gap`, sim/gap_cli.py).
 
 The filter can only be as right as its motion model (Eq. 4, 9). This diagnostic starts the
 model at the simulator's TRUE configuration (joint angles, contact points, object pose) and
@@ -22,7 +22,7 @@ the TRUE hand parameters, so that what remains is the model's own error:
   the scale of the likelihood's `sigma_tension`.
 
 Where each prediction starts (`GapSettings.start`): "settle", the true configuration settled
-at the command with glued contacts (the issue's measure); or "sim-loads", the true
+at the command with glued contacts; or "sim-loads", the true
 configuration with each contact's stretch set to the sim's own contact force on the object
 (`sim.truth.pad_forces`), relaxed at the command. The sim's contacts carry loads from their
 history (which side of its cone a contact sits on, how the squeeze between the side fingers
@@ -34,7 +34,6 @@ This is a sim-only tool (it reads ground truth); the estimator never runs it.
 
 from __future__ import annotations
 
-import argparse
 import math
 import time
 from dataclasses import dataclass, field, replace
@@ -46,24 +45,32 @@ from sim.pads import SLIDE_FRICTION, TORSION_FRICTION
 from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
 from vlr.kinematics import HandModel
-from vlr.motion import STATUS, MotionConfig, MotionModel, ObjectParams, ParticleState
+from vlr.motion import (
+    STATUS,
+    MotionConfig,
+    MotionModel,
+    ObjectParams,
+    PadFriction,
+    ParticleState,
+)
 from vlr.observation import grasp_turn, rotation_error
 
-__all__ = ["LADDER", "GapSettings", "record_actions", "measure_gap", "gap_report", "register"]
+__all__ = ["LADDER", "FILTER_RUNG", "GapSettings", "record_actions", "measure_gap",
+           "gap_report", "format_report", "OBJECTS"]
 
 _BASE = ("springs", "tendon", "limits", "contacts")
-_ALL = _BASE + ("link_gravity", "object_gravity", "rolling")
-# Model terms switched on in turn: (name, energy terms, the rolling contacts' friction:
-# "" none, "cone" the return map between solves (`MotionConfig.cone_return`), "friction" the
-# pads' friction in the energy); the last row is the full model.
-LADDER: tuple[tuple[str, tuple[str, ...], str], ...] = (
-    ("fixed contacts, no weights", _BASE, ""),
-    ("+ link weights", _BASE + ("link_gravity",), ""),
-    ("+ object weight", _BASE + ("link_gravity", "object_gravity"), ""),
-    ("+ rolling", _ALL, ""),
-    ("+ cone return", _ALL, "cone"),
-    ("+ friction", _ALL, "friction"),
+_ALL = _BASE + ("link_gravity", "object_gravity")
+# Model terms switched on in turn: (name, energy terms, rolling contacts, the pads' friction
+# in the energy (`vlr.motion.PadFriction`)). "+ rolling" is the filter's own model; the
+# pads' friction is measured beside it (docs/DECISIONS.md: not adopted by the filter).
+LADDER: tuple[tuple[str, tuple[str, ...], bool, bool], ...] = (
+    ("fixed contacts, no weights", _BASE, False, False),
+    ("+ link weights", _BASE + ("link_gravity",), False, False),
+    ("+ object weight", _ALL, False, False),
+    ("+ rolling", _ALL, True, False),
+    ("+ friction", _ALL, True, True),
 )
+FILTER_RUNG = "+ rolling"
 OBJECTS = ("apple", "wine_glass", "toy_block", "flat_screwdriver", "gelatin_box")
 STARTS = ("settle", "sim-loads")
 
@@ -78,32 +85,21 @@ class GapSettings:
         actions: random actions to make.
         drift_actions: actions predicted open loop for the drift (the first ones).
         action_range: |tendon change| range [m]; band: commands stay this close to the grasp.
-        rolling_substeps: solves per action with rolling (`MotionConfig.rolling_substeps`).
-        spin_stiffness: the pads' torsional stiffness [N m/rad] (`MotionConfig`).
-        slide_friction, spin_friction: the pads' sliding and torsional [m] friction
-            coefficients in the friction rung (`MotionConfig`); by default the sim's pads'
-            (`sim.pads`): known, like the pad's radius.
-        contact_stiffness: the model's contact penalty k_c [N/m] (`MotionConfig`), normal
-            and tangential alike.
-        spin_memory: in the friction rung, each pad keeps its spin torque from one command
-            change to the next (`MotionConfig.spin_memory`): along the open-loop path; the
-            per-action gap restarts from a settle, which holds none.
-        exact_cylinder: in the rolling rungs, a pad on a cylinder's side is held to the
-            cylinder's axis, not to a sphere of its radius (`MotionConfig.exact_cylinder`).
-        limit_stiffness: the model's joint stops [N m/rad] (`MotionConfig.limit_stiffness`;
-            the sim's are about 120 at the proximal joints and 18 at the distal ones, since
-            MuJoCo scales a limit's stiffness with the link's inertia).
+        motion: the model's settings (`vlr.motion.MotionConfig`; each rung switches its
+            terms and rolling); None: the sim identification's own (the sim backend's
+            defaults, `vlr.settings.load_settings`).
+        friction: the pads' friction in the friction rung (`vlr.motion.PadFriction`); by
+            default the sim's pads' (`sim.pads`): known, like the pad's radius.
         start: where each prediction starts (module docstring): "settle" or "sim-loads".
         ramp_time: how long the sim takes to make each command change [s]
-            (`sim.backend.SimOptions.ramp_time`). 0.05, the setting of every committed gap
-            report; `vlr identify`'s sim trials move over 0.1 s (`vlr.trial.RAMP_TIME_DEFAULT`,
-            the hardware backend's default move).
+            (`sim.backend.SimOptions.ramp_time`); None: the sim identification's own
+            (`sim.backend.SimWorldOptions`).
         fit: an unknown ("stiffness:thumb.distal", as `vlr identify --unknown`) whose value
             the model wants is profiled on every rung (`sim.gap_fit`); None: no profile.
         fit_range: the profile's (low, high) [SI units]; None: the unknown's default prior.
         fit_points: the profile's values.
         fit_sigma: the profile cost's units, position [mm] and orientation [deg]: the sim
-            trials' likelihood scales (`vlr.trial.ROLLING_TURN_SIGMA`).
+            trials' likelihood scales.
         fit_turn_deg: > 0: the profile's cost is the filter's likelihood with this turn
             scale [deg] (`sim.gap_fit.likelihood_cost`; the sim trials' is 1); 0: squared
             motion errors without the turn.
@@ -116,16 +112,10 @@ class GapSettings:
     drift_actions: int = 15
     action_range: tuple[float, float] = (0.2e-3, 0.4e-3)
     band: float = 0.4e-3
-    rolling_substeps: int = MotionConfig.rolling_substeps
-    spin_stiffness: float = MotionConfig.spin_stiffness
-    slide_friction: float = SLIDE_FRICTION
-    spin_friction: float = TORSION_FRICTION
-    contact_stiffness: float = MotionConfig.contact_stiffness
-    spin_memory: bool = False
-    exact_cylinder: bool = False
-    limit_stiffness: float = MotionConfig.limit_stiffness
+    motion: MotionConfig | None = None
+    friction: PadFriction = PadFriction(slide=SLIDE_FRICTION, spin=TORSION_FRICTION)
     start: str = "settle"
-    ramp_time: float = 0.05
+    ramp_time: float | None = None
     fit: str | None = None
     fit_range: tuple[float, float] | None = None
     fit_points: int = 25
@@ -141,33 +131,23 @@ class GapSettings:
             lo, hi = self.fit_range
             if not (math.isfinite(lo) and math.isfinite(hi) and lo < hi):
                 raise UserError(f"fit range ({lo}, {hi}) must be finite with low < high")
-        if not (isinstance(self.ramp_time, (int, float)) and not isinstance(self.ramp_time, bool)
-                and math.isfinite(self.ramp_time) and 0 < self.ramp_time <= 2.0):
+        if self.motion is None:
+            from vlr.settings import load_settings
+
+            object.__setattr__(self, "motion",
+                               load_settings({"world.backend": "sim"}).filter.motion)
+        if self.ramp_time is None:
+            from sim.backend import SimWorldOptions
+
+            object.__setattr__(self, "ramp_time", SimWorldOptions.ramp_time)
+        if not (math.isfinite(self.ramp_time) and 0 < self.ramp_time <= 2.0):
             raise UserError(f"ramp time {self.ramp_time!r} s must be in (0, 2]")
         if self.start not in STARTS:
             raise UserError(f"start {self.start!r}: expected one of {', '.join(STARTS)}")
-        if not (np.isfinite(self.contact_stiffness) and self.contact_stiffness > 0):
-            raise UserError(f"contact stiffness {self.contact_stiffness!r} N/m must be > 0")
-        if not (np.isfinite(self.limit_stiffness) and self.limit_stiffness > 0):
-            raise UserError(f"limit stiffness {self.limit_stiffness!r} N m/rad must be > 0")
         if not isinstance(self.actions, int) or self.actions < 1:
             raise UserError(f"actions {self.actions!r} must be an integer >= 1")
         if not isinstance(self.drift_actions, int) or self.drift_actions < 1:
             raise UserError(f"drift actions {self.drift_actions!r} must be an integer >= 1")
-        if not (np.isfinite(self.spin_stiffness) and self.spin_stiffness >= 0):
-            raise UserError(f"spin stiffness {self.spin_stiffness!r} N m/rad must be >= 0")
-        if not self.slide_friction > 0:
-            raise UserError(f"slide friction {self.slide_friction!r} must be > 0 (inf: no "
-                            "contact slides)")
-        if not (np.isfinite(self.spin_friction) and 0 <= self.spin_friction <= 0.01):
-            raise UserError(f"spin friction {self.spin_friction!r} m must be in [0, 0.01] "
-                            "(a torsional friction coefficient, about a pad's contact radius)")
-        if self.spin_memory and not self.spin_friction:
-            raise UserError("spin memory keeps the pads' torsional friction torques: it needs a "
-                            "spin friction > 0")
-        if not isinstance(self.rolling_substeps, int) or self.rolling_substeps < 1:
-            raise UserError(f"rolling substeps {self.rolling_substeps!r} must be an integer "
-                            ">= 1")
         lo, hi = self.action_range
         if not (0 < lo <= hi <= 2e-3):
             raise UserError(f"action range ({lo}, {hi}) m must satisfy 0 < low <= high <= "
@@ -311,29 +291,17 @@ def _turn_summary(rows: list[dict]) -> dict:
 
 
 def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
-                friction: str = "") -> dict:
-    """Per-action, static and drift gap of the motion model with `terms` (module docstring),
-    with the pads' friction (`settings`): in the energy if `friction` is "friction", as the
-    return map between solves if "cone" (`MotionConfig.cone_return`)."""
-    if friction not in ("", "cone", "friction"):
-        raise ValueError(f"friction {friction!r}: expected '', 'cone' or 'friction'")
+                rolling: bool = True, friction: bool = False) -> dict:
+    """Per-action, static and drift gap of the motion model with `terms` and rolling or
+    pinned contacts (module docstring), with the pads' friction (`settings.friction`) in the
+    energy if `friction`."""
     model = HandModel.from_spec(rec.hand_spec)
     obj = ObjectParams.from_spec(rec.object_spec)
     # The turn's axis runs from the thumb (`vlr.observation.grasp_turn`), as the filter's
     # turn term does; a hand without one has no turn split (NaN), not another finger's.
     thumb = model.finger_index("thumb") if "thumb" in model.names else None
-    cfg = MotionConfig(terms=terms, rolling_substeps=settings.rolling_substeps,
-                       spin_stiffness=settings.spin_stiffness,
-                       contact_stiffness=settings.contact_stiffness,
-                       exact_cylinder=settings.exact_cylinder,
-                       limit_stiffness=settings.limit_stiffness)
-    if friction == "friction":
-        cfg = replace(cfg, slide_friction=settings.slide_friction,
-                      spin_friction=settings.spin_friction,
-                      spin_memory=settings.spin_memory)
-    elif friction == "cone":
-        cfg = replace(cfg, cone_return=settings.slide_friction)
-    motion = MotionModel(model, obj, cfg)
+    cfg = replace(settings.motion, terms=terms, rolling=rolling)
+    motion = MotionModel(model, obj, cfg, settings.friction if friction else None)
     # The static settle may travel further than an action may (the model's own equilibrium).
     settle = replace(cfg, jump_theta=1.0, jump_pos=0.05, max_iter=200)
     rows, static = [], []
@@ -438,10 +406,9 @@ def _drift(motion: MotionModel, settle: MotionConfig, model: HandModel, rec: Rec
             "open_loop_ratio_orientation_median": float(np.nanmedian(r[:, 1]))}
 
 
-def gap_report(settings: GapSettings,
-               ladder: tuple[tuple[str, tuple[str, ...], str], ...] = LADDER) -> dict:
+def gap_report(settings: GapSettings, ladder: tuple = LADDER) -> dict:
     """Record the actions once, then measure every rung of `ladder` on them. The top-level
-    ratios are the full model's (the last rung)."""
+    ratios are the filter's model's (`FILTER_RUNG`), else the last rung's."""
     t0 = time.perf_counter()
     if settings.fit:
         check_fit(settings)
@@ -449,9 +416,9 @@ def gap_report(settings: GapSettings,
     if len(rec.commands) < 2:
         raise UserError(f"{settings.object}: the grasp was lost at the first action; "
                         "nothing to measure")
-    configs = [{"name": name, **measure_gap(rec, terms, settings, friction)}
-               for name, terms, friction in ladder]
-    full = configs[-1]
+    configs = [{"name": name, **measure_gap(rec, terms, settings, rolling, friction)}
+               for name, terms, rolling, friction in ladder]
+    full = next((c for c in configs if c["name"] == FILTER_RUNG), configs[-1])
     true_p = [np.linalg.norm(b.position - a.position) * 1e3
               for a, b in zip(rec.truths, rec.truths[1:], strict=False)]
     true_r = [_angle_deg(b.rotation @ a.rotation.T)
@@ -459,14 +426,8 @@ def gap_report(settings: GapSettings,
     return {
         "object": settings.object, "hand": settings.hand, "seed": settings.seed,
         "actions": len(rec.commands) - 1, "grasp_lost_at": rec.dropped_at,
-        "rolling_substeps": settings.rolling_substeps,
-        "spin_stiffness": settings.spin_stiffness,
-        "slide_friction": settings.slide_friction,
-        "spin_friction": settings.spin_friction,
-        "spin_memory": settings.spin_memory,
-        "exact_cylinder": settings.exact_cylinder,
-        "limit_stiffness": settings.limit_stiffness,
-        "contact_stiffness": settings.contact_stiffness,
+        "motion": {k: v for k, v in vars(settings.motion).items() if k != "terms"},
+        "friction": vars(settings.friction),
         "start": settings.start,
         "ramp_time": settings.ramp_time,
         "true_motion": {"position_mm_mean": float(np.mean(true_p)),
@@ -483,18 +444,15 @@ def gap_report(settings: GapSettings,
 
 def check_fit(settings: GapSettings) -> None:
     """Refuse a `fit` the hand or the object cannot take, before the sim runs."""
-    from vlr.filter import parse_unknown
     from vlr.spec import load_hand, load_object
+    from vlr.unknowns import parse_unknown
 
     model = HandModel.from_spec(load_hand(settings.hand))
     try:
-        u = parse_unknown(settings.fit, model,
-                          obj=ObjectParams.from_spec(load_object(settings.object)))
+        parse_unknown(settings.fit, model,
+                      obj=ObjectParams.from_spec(load_object(settings.object)))
     except (KeyError, ValueError) as exc:
         raise UserError(f"--fit {settings.fit!r}: {exc}") from None
-    if u.kind == "noise":
-        raise UserError(f"--fit {settings.fit!r}: the likelihood's noise factor does not "
-                        "move the model; nothing to fit")
 
 
 def format_report(rep: dict) -> str:
@@ -504,8 +462,7 @@ def format_report(rep: dict) -> str:
             f"{rep['true_motion']['orientation_deg_mean']:.2f} deg per action"
             + ("; each action from the sim's contact loads"
                if rep.get("start") == "sim-loads" else "")
-            + (f"; the sim's commands ramped over {rep['ramp_time']:g} s"
-               if rep.get("ramp_time", 0.05) != 0.05 else "")
+            + f"; the sim's commands ramped over {rep['ramp_time']:g} s"
             + (f"; grasp lost at action {rep['grasp_lost_at']}" if rep["grasp_lost_at"] else ""))
     cols = f"{'model':28s} {'ratio pos':>10s} {'ratio ori':>10s} {'drift pos':>10s} " \
            f"{'drift ori':>10s} {'static mm':>10s} {'static deg':>10s} {'joint deg':>10s} " \
@@ -557,106 +514,3 @@ def format_report(rep: dict) -> str:
                      f"{f0['sigma_pos_mm']:g} mm and {f0['sigma_rot_deg']:g} deg), each action "
                      "from the true state (restart) or all in sequence (open loop)")
     return "\n".join(lines)
-
-
-def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("gap", help="the model-world gap from the simulator's true state: "
-                       "per-action, static and open-loop drift, model term by term")
-    p.add_argument("--object", default="apple",
-                   help=f"object name or spec file, a comma list, or 'all' ({', '.join(OBJECTS)})")
-    p.add_argument("--hand", default="modelo", help="hand name or spec file (default modelo)")
-    p.add_argument("--seed", type=int, default=0, help="seeds the random actions")
-    p.add_argument("--actions", type=int, default=30, help="random actions (default 30)")
-    p.add_argument("--drift-actions", type=int, default=15,
-                   help="actions predicted open loop for the drift (default 15)")
-    p.add_argument("--substeps", type=int, default=MotionConfig.rolling_substeps,
-                   help="solves per action with rolling contacts (default "
-                   f"{MotionConfig.rolling_substeps})")
-    p.add_argument("--spin-stiffness", type=float, default=MotionConfig.spin_stiffness,
-                   help="the pads' torsional stiffness with rolling [N m/rad] (default "
-                   f"{MotionConfig.spin_stiffness})")
-    p.add_argument("--slide-friction", type=float, default=SLIDE_FRICTION,
-                   help="the pads' sliding friction coefficient in the cone-return and "
-                   "friction rungs "
-                   f"(default {SLIDE_FRICTION}, the sim's pads')")
-    p.add_argument("--spin-friction", type=float, default=TORSION_FRICTION,
-                   help="the pads' torsional friction coefficient [m] in the friction rung "
-                   f"(default {TORSION_FRICTION}, the sim's pads')")
-    p.add_argument("--contact-stiffness", type=float, default=MotionConfig.contact_stiffness,
-                   metavar="K_C", help="the model's contact penalty [N/m] (default "
-                   f"{MotionConfig.contact_stiffness:g})")
-    p.add_argument("--spin-memory", action="store_true",
-                   help="in the friction rung, each pad keeps its spin torque from one "
-                   "action to the next (MotionConfig.spin_memory; shows along the open-loop "
-                   "path)")
-    p.add_argument("--exact-cylinder", action="store_true",
-                   help="in the rolling rungs, a pad on a cylinder is held to its axis, not "
-                   "to a sphere of its radius (MotionConfig.exact_cylinder)")
-    p.add_argument("--limit-stiffness", type=float, default=MotionConfig.limit_stiffness,
-                   metavar="K_LIM", help="the model's joint stops [N m/rad] (default "
-                   f"{MotionConfig.limit_stiffness:g}; the sim's distal stops are about 18, "
-                   "and vlr identify's sim default is 17)")
-    p.add_argument("--start", choices=STARTS, default="settle",
-                   help="where each prediction starts: the true configuration settled with "
-                   "glued contacts (default, the issue's measure), or with the sim's own "
-                   "contact loads as the contacts' stretch, relaxed (sim-loads)")
-    p.add_argument("--ramp-time", type=float, default=GapSettings.ramp_time, metavar="S",
-                   help="how long the sim takes to make each command change [s] (default "
-                   f"{GapSettings.ramp_time:g}, that of the committed reports; vlr identify's "
-                   "sim trials move over 0.1 s, the hardware backend's default move)")
-    p.add_argument("--fit", metavar="UNKNOWN",
-                   help="profile the value of an unknown the model wants from the true "
-                   "states, on every rung (as --unknown: stiffness:thumb.distal, "
-                   "length:left.proximal, mass, ...)")
-    p.add_argument("--fit-range", metavar="LOW,HIGH", type=_pair,
-                   help="the profile's range [SI units] (default: the unknown's prior)")
-    p.add_argument("--fit-points", type=int, default=GapSettings.fit_points,
-                   help=f"the profile's values (default {GapSettings.fit_points})")
-    p.add_argument("--fit-turn-deg", type=float, default=0.0, metavar="DEG",
-                   help="cost the profile with the filter's likelihood and this turn scale "
-                   "(the sim trials' is 1; default 0: squared motion errors, no turn)")
-    p.add_argument("--json", help="write the report (per object, per model rung) as JSON")
-    p.set_defaults(func=run)
-
-
-def _pair(text: str) -> tuple[float, float]:
-    try:
-        lo, hi = (float(v) for v in text.split(","))
-    except ValueError:
-        raise argparse.ArgumentTypeError(f"{text!r}: expected LOW,HIGH") from None
-    return lo, hi
-
-
-def run(args: argparse.Namespace) -> int:
-    from pathlib import Path
-
-    from vlr.io import write_json_atomic
-
-    names = OBJECTS if args.object == "all" else tuple(
-        o.strip() for o in args.object.split(",") if o.strip())
-    if not names:
-        raise UserError(f"--object {args.object!r} names no object")
-    if args.json and not Path(args.json).resolve().parent.is_dir():
-        raise UserError(f"--json {args.json}: its folder does not exist")
-    reports = []
-    for name in names:
-        settings = GapSettings(object=name, hand=args.hand, seed=args.seed,
-                               actions=args.actions, drift_actions=args.drift_actions,
-                               rolling_substeps=args.substeps,
-                               spin_stiffness=args.spin_stiffness,
-                               slide_friction=args.slide_friction,
-                               spin_friction=args.spin_friction,
-                               contact_stiffness=args.contact_stiffness,
-                               spin_memory=args.spin_memory,
-                               exact_cylinder=args.exact_cylinder,
-                               limit_stiffness=args.limit_stiffness, start=args.start,
-                               ramp_time=args.ramp_time, fit=args.fit,
-                               fit_range=args.fit_range, fit_points=args.fit_points,
-                               fit_turn_deg=args.fit_turn_deg)
-        rep = gap_report(settings)
-        print(format_report(rep) + "\n", flush=True)
-        reports.append(rep)
-    if args.json:
-        write_json_atomic(args.json, reports[0] if len(reports) == 1 else {"objects": reports})
-        print(f"wrote {args.json}")
-    return 0

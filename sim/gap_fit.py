@@ -1,5 +1,5 @@
 """`vlr gap --fit UNKNOWN`: which value of an unknown does the motion model want, given the
-simulator's TRUE states? (issue 5, the spring's lean.)
+simulator's TRUE states?
 
 The filter identifies a parameter (a joint spring, a link length, the object's mass...) by
 the motion it predicts (Eq. 4, 9). If the model itself, started at the sim's true
@@ -33,10 +33,10 @@ from collections.abc import Callable
 import numpy as np
 
 from vlr.errors import UserError
-from vlr.filter import hold_unknowns, parse_unknown, set_unknown, unknown_values
 from vlr.kinematics import HandModel
 from vlr.motion import MotionModel, ParticleState
-from vlr.observation import ObservationModel, PomObservation
+from vlr.observation import ObservationConfig, ObservationModel, PomObservation
+from vlr.unknowns import hold_unknowns, parse_unknown, set_unknown, unknown_values
 
 __all__ = ["likelihood_cost", "motion_errors", "profile_unknown"]
 
@@ -101,9 +101,6 @@ def profile_unknown(rec, model: HandModel, motion: MotionModel, spec: str,
         u = parse_unknown(spec, model, obj=motion.obj)
     except (KeyError, ValueError) as exc:
         raise UserError(f"--fit {spec!r}: {exc}") from None
-    if u.kind == "noise":
-        raise UserError(f"--fit {spec!r}: the likelihood's noise factor does not move the "
-                        "model; nothing to fit")
     if values is None:
         if not (isinstance(points, int) and points >= 2):
             raise UserError(f"fit points {points!r} must be an integer >= 2")
@@ -111,9 +108,8 @@ def profile_unknown(rec, model: HandModel, motion: MotionModel, spec: str,
     values = np.asarray(values, dtype=float)
     n = len(values)
     s_p, s_r = sigma
-    obs_model = (ObservationModel(sigma_pos=s_p * 1e-3, sigma_rot=math.radians(s_r),
-                                  sigma_turn=math.radians(turn_deg),
-                                  opposed=model.finger_index("thumb"))
+    obs_model = (ObservationModel(ObservationConfig(sigma_pos_mm=s_p, sigma_rot_deg=s_r,
+                                                    sigma_turn_deg=turn_deg), model)
                  if turn_deg > 0 else None)
 
     def cost(st: ParticleState, p0, r0, t0, t1) -> np.ndarray:

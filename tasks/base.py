@@ -1,8 +1,9 @@
-"""The common gymnasium environment of the in-hand manipulation tasks (METHOD.md 5-6).
+"""The common gymnasium environment of the in-hand manipulation tasks (docs/METHOD.md 5-6).
 
 One template for every task (Gymnasium-Robotics style): `reset` opens the backend once,
-grasps and self-identifies the hand-object system (Algorithm 1, `vlr.identify`) so that an
-episode starts from an identified VLR, then lets the task set itself up (`_start_task`);
+grasps and self-identifies the hand-object system (Algorithm 1, `vlr.run`, with the same
+settings tree and backend defaults as `vlr identify`) so that an episode starts from an
+identified VLR, then lets the task set itself up (`_start_task`);
 `step` applies a tendon change, re-observes the POM through the camera, lets the particle
 filter keep updating the VLR (contacts roll), then asks the task for reward and progress
 (`_task_step`).
@@ -21,6 +22,7 @@ sequence of actions slackens a tendon or crushes the object (the grasp's workspa
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
@@ -73,20 +75,10 @@ class HandTaskEnv(gym.Env):
         include_image: add the palm camera frame to the observation ("image"), resized to
             `image_size` (height, width) [px].
         hardware_config: the hardware YAML file (backend "hardware").
-        rolling: the filter's motion model with rolling contacts (`vlr.surface`), and with
-            it the backend's likelihood scales for rolling without the turn term
-            (`vlr.trial.ROLLING_SIGMA`, `vlr identify`'s default in sessions 8-16, at which
-            the tasks' figures in docs/TASKS.md were measured; `vlr identify` has since added
-            the turn term, not measured on the tasks); False: pinned contacts at 0.5 mm / 1
-            degree.
-        nominal_theta_deg: the user's guess of the grasp's joint angles [deg], (proximal,
-            distal) for every finger alike or per finger in the hand's order, as `vlr
-            identify --nominal-theta-deg`; None: the generic guess
-            (`vlr.synthetic.SyntheticConfig.grasp_theta`, -17 and 69 degrees). The default
-            is the guess every sim identification row uses, (-10, 15) (`vlr.trial.
-            GUESS_DEFAULT`): the generic one wraps the distal joints and left handwriting's
-            and the cups' VLR 15-17 degrees off (docs/TASKS.md, "The grasp guess").
-        prior_spread_deg: prior std of the joint angles about the nominal grasp [deg].
+        settings: the identification's settings beyond the backend's defaults, dotted keys
+            of the settings tree (`vlr.settings`, as `vlr identify --set`), e.g.
+            {"filter.guess_theta_deg": [-5, 20]}; `particles` and `identify_iterations`
+            set filter.particles and the loop's action count.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
@@ -99,9 +91,8 @@ class HandTaskEnv(gym.Env):
                  command_band: tuple[float, float] = (0.25e-3, 0.4e-3),
                  squeeze: float = 0.0,
                  include_image: bool = False, image_size: tuple[int, int] = (120, 160),
-                 hardware_config: str | None = None, rolling: bool = False,
-                 nominal_theta_deg: tuple[float, ...] | None = (-10.0, 15.0),
-                 prior_spread_deg: float = 10.0) -> None:
+                 hardware_config: str | None = None,
+                 settings: Mapping[str, Any] | None = None) -> None:
         if backend not in ("sim", "hardware"):
             raise ValueError(f"backend {backend!r}: use 'sim' or 'hardware'")
         if backend == "hardware" and not hardware_config:
@@ -122,23 +113,9 @@ class HandTaskEnv(gym.Env):
         self.squeeze = float(squeeze)
         self.include_image = bool(include_image)
         self.hardware_config = hardware_config
-        if not isinstance(rolling, bool):
-            raise ValueError(f"rolling {rolling!r} must be True or False")
-        self.rolling = rolling
-        if nominal_theta_deg is not None:
-            try:
-                nominal_theta_deg = tuple(float(v) for v in nominal_theta_deg)
-            except (TypeError, ValueError):
-                raise ValueError(f"nominal_theta_deg {nominal_theta_deg!r}: give joint "
-                                 "angles [deg]") from None
-            if len(nominal_theta_deg) not in (2, 2 * TENDONS) or not all(
-                    np.isfinite(nominal_theta_deg)):
-                raise ValueError(f"nominal_theta_deg {nominal_theta_deg!r}: give 2 finite "
-                                 f"angles (every finger alike) or {2 * TENDONS}")
-        self.nominal_theta_deg = nominal_theta_deg
-        if not (isinstance(prior_spread_deg, int | float) and 0 < prior_spread_deg <= 45):
-            raise ValueError(f"prior_spread_deg {prior_spread_deg!r} must be in (0, 45]")
-        self.prior_spread_deg = float(prior_spread_deg)
+        self.settings_layer = dict(settings or {})
+        # The identification's settings, checked now: a bad key is one error at make().
+        self.identification_settings(0)
         self.action_space = spaces.Box(-self.max_step, self.max_step, shape=(TENDONS,),
                                        dtype=np.float64)
         # Poses: position within 1 m of the palm [m], rotation vector (norm <= pi) [rad].
@@ -166,13 +143,13 @@ class HandTaskEnv(gym.Env):
 
     # ------------------------------------------------------------------ backend
     def _open_hand(self):
-        """The backend's `Hand` (sim: `vlr.cli.open_backend("sim", ...)`). Tasks with their
-        own scene (maze, cups) override this."""
-        from vlr.cli import open_backend
+        """The backend's `Hand` (`vlr.backends.open_hand`). Tasks with their own scene
+        (maze, cups) override this."""
+        from vlr.backends import open_hand
 
         if self.backend == "sim":
-            return open_backend("sim", object=self.object_name, seed=0)
-        return open_backend("hardware", config=self.hardware_config)
+            return open_hand("sim", object=self.object_name, seed=0)
+        return open_hand("hardware", config=self.hardware_config)
 
     @property
     def commands(self) -> np.ndarray:
@@ -230,33 +207,37 @@ class HandTaskEnv(gym.Env):
         self._start_task()
         return self._get_obs(), self._info()
 
-    def _motion_config(self):
-        """The motion model's settings for the filter (`vlr.motion.MotionConfig`); tasks
-        whose palm does not face up give gravity in the palm frame here (cups)."""
-        from vlr.motion import MotionConfig
+    def _identification_layer(self) -> dict[str, Any]:
+        """Settings the task itself gives its identification (cups: gravity in the palm
+        frame, from the arm's pose), over the backend's defaults and under the user's."""
+        return {}
 
-        return MotionConfig()
+    def identification_settings(self, seed: int):
+        """The identification's settings tree (`vlr.settings`): the backend's defaults, the
+        particle count and the action budget (every action is made: the baseline fits its
+        Jacobian correction to them), the task's own, then the user's `settings`."""
+        from vlr.settings import load_settings
+
+        n = self.identify_iterations
+        return load_settings({"world.backend": self.backend},
+                             {"filter.particles": self.particles,
+                              "loop.max_iterations": n, "loop.min_iterations": n,
+                              "seed": seed},
+                             self._identification_layer()
+                             if getattr(self, "hand", None) is not None else {},
+                             self.settings_layer)
 
     def _identify_grasp(self) -> None:
         """Grasp and self-identify (Algorithm 1) with a fresh filter, then move the commands
         to the task's centre: what `reset` does, and what a task that grasps several
         objects per episode (cups) does for each. Bumps `identified` (the baseline refits
         its Jacobian correction on a new identification)."""
-        from vlr.filter import FilterConfig
-        from vlr.identify import IdentifyConfig, identify
-        from vlr.kinematics import HandModel
-        from vlr.motion import ObjectParams
-        from vlr.synthetic import SyntheticConfig, nominal_grasp
+        import dataclasses
 
-        filter_seed = int(self.np_random.integers(0, 2**31 - 1))
-        model = HandModel.from_spec(self.hand.spec)
-        obj = ObjectParams.from_spec(self.hand.object_spec)
-        from vlr.observation import ObservationModel
-        from vlr.trial import DEFAULT_SIGMA, ROLLING_SIGMA
+        from vlr.run import run_identification
+        from vlr.world import hand_world
 
-        motion = self._motion_config().with_rolling(self.rolling)
-        sp, sr = (ROLLING_SIGMA if self.rolling and self.backend in ROLLING_SIGMA
-                  else DEFAULT_SIGMA)[self.backend]
+        settings = self.identification_settings(int(self.np_random.integers(0, 2**31 - 1)))
         self.moves = []
         self.filter_lost = self.grasp_lost = False
         self.grasp_message = ""
@@ -268,22 +249,14 @@ class HandTaskEnv(gym.Env):
             self.moves.append(Move(np.asarray(self.hand.commands, dtype=float).copy(), obs))
             return obs
 
-        # All `identify_iterations` exploratory moves are made even if the interval
-        # criterion holds earlier: the baseline fits its Jacobian correction to them.
-        cfg = IdentifyConfig(max_iterations=self.identify_iterations,
-                             min_iterations=self.identify_iterations,
-                             filter=FilterConfig(
-                                 n_particles=self.particles, seed=filter_seed, motion=motion,
-                                 theta_spread=float(np.radians(self.prior_spread_deg)),
-                                 observation=ObservationModel(sigma_pos=sp * 1e-3,
-                                                              sigma_rot=float(np.radians(sr)))))
-        guess = (SyntheticConfig(motion=motion) if self.nominal_theta_deg is None else
-                 SyntheticConfig(grasp_theta=tuple(np.radians(self.nominal_theta_deg)),
-                                 motion=motion))
+        # The world around the env's own hand, observed through the env (it records every
+        # move), and not scored: the filter and the policy never see the truth.
+        world = dataclasses.replace(hand_world(self.hand, settings), truth=None)
         try:
-            self.identification = identify(self.hand, observer, model, obj,
-                                           nominal_grasp(model, obj, guess),
-                                           cfg, watch=lambda pf, rec: box.update(pf=pf))
+            run = run_identification(settings, world=world,
+                                     observe_through=lambda w: observer,
+                                     watch=lambda pf, rec: box.update(pf=pf))
+            self.identification = run.result
         except FloatingPointError:
             # Every particle's solve failed (too few particles, or a prior that misses the
             # grasp): the episode goes on with the VLR lost, `filter_lost` says so. Before

@@ -164,11 +164,9 @@ class CupStackingEnv(HandTaskEnv):
 
         return CupsHand(CUPS, seed=0)
 
-    def _motion_config(self):
-        from vlr.motion import MotionConfig
-
+    def _identification_layer(self) -> dict:
         # Gravity in the palm frame from the arm's known pose (palm down: +z).
-        return MotionConfig(gravity=tuple(float(g) for g in self.hand.gravity_in_palm()))
+        return {"filter.motion.gravity": [float(g) for g in self.hand.gravity_in_palm()]}
 
     # ------------------------------------------------------------------ the table
     def _prepare_episode(self) -> None:

@@ -65,11 +65,6 @@ class MarbleMazeEnv(HandTaskEnv):
         n_runs: play only the first runs of the path (short episodes; None = all five).
         command_band: as `HandTaskEnv`'s; symmetric here: the light holder's grasp holds
             +-0.4 mm, and tilting both ways needs both directions (docs/TASKS.md).
-        rolling: as `HandTaskEnv`'s; on by default here: with pinned contacts the filter
-            cannot follow the holder, whatever the grasp guess (6.9 degrees off with the
-            generic guess, 10.2 with the user's), and with rolling contacts and the
-            user's guess it identifies the grasp within 3.6 degrees (seed 0; docs/TASKS.md,
-            "The maze's grasp, identified").
     """
 
     object_name = "maze_holder"
@@ -85,9 +80,8 @@ class MarbleMazeEnv(HandTaskEnv):
                  tilt_deg: float = 1.5, tolerance_deg: float = 0.2, steps_per_run: int = 15,
                  dwell: float = 1.5, n_runs: int | None = None,
                  command_band: tuple[float, float] = (0.4e-3, 0.4e-3),
-                 rolling: bool = True, **kwargs: Any) -> None:
-        super().__init__(backend, render_mode, command_band=command_band, rolling=rolling,
-                         **kwargs)
+                 **kwargs: Any) -> None:
+        super().__init__(backend, render_mode, command_band=command_band, **kwargs)
         if tilt_deg <= 0 or tolerance_deg <= 0 or steps_per_run < 1 or dwell < 0:
             raise ValueError("tilt_deg, tolerance_deg, steps_per_run must be positive and "
                              "dwell >= 0")

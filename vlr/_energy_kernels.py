@@ -7,9 +7,11 @@ blocks A_i (K x K) that couple only through the object block C (6 x 6) via B_i (
 Newton system is solved by eliminating the finger blocks (Schur complement): O(N K^3 + 6^3)
 per particle instead of O((NK + 6)^3).
 
-Terms are identified by the codes below; `flags[code] != 0` enables a term. To add a term,
-write a `_term_*` device function with the common accumulate-into-(g, H) contract and call it
-from `_evaluate` (the NumPy reference in `vlr.motion` gets its energy alongside).
+Terms are identified by the codes below; `flags[code] != 0` enables a term. Each term adds
+its energy, gradient and Hessian blocks in place, inside `_evaluate`; a term that ties a
+point fixed in a finger's distal frame to a point fixed in the object goes through `_pair`.
+To add a term, add its code here, its branch in `_evaluate` and its energy to the NumPy
+reference (`vlr.motion.reference_energy`), which the tests check the kernel against.
 """
 
 from __future__ import annotations
@@ -32,15 +34,9 @@ N_PRM = 13
 # Layout of a rolling frame (one per contact): local centre of curvature in O (3), contact
 # normal in the palm frame (3), the finger's summed joint angles (1), the object rotation
 # R_PO (9, row-major) at the start of the solve, the contact's normal force then (1) [N]
-# (it sets the friction's limits) and the spin torque the pad holds (1) [N m]
-# (`MotionConfig.spin_memory`), and for a contact on a cylinder's side the cylinder's axis in
-# O (3; zero elsewhere: the local surface is then the sphere about the centre;
-# `MotionConfig.exact_cylinder`), and the local surface's radius of curvature rho (1) [m]:
-# the contact's own, so that a particle can carry an unknown curvature (issue #5, term (b)).
-(RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, RL_FORCE, RL_SPIN_TORQUE, RL_AXIS, RL_RHO,
- N_RL) = 0, 3, 6, 7, 16, 17, 18, 21, 22
-# A stored spin torque's share of its cone is held below this (`spin_offset`).
-SPIN_MEMORY_CLIP = 0.99
+# (it sets the friction's limits), and the local surface's radius of curvature rho (1) [m]:
+# the contact's own, so that a particle can carry an unknown curvature (`vlr.unknowns`).
+RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, RL_FORCE, RL_RHO, N_RL = 0, 3, 6, 7, 16, 17, 18
 
 
 @njit(cache=True)
@@ -75,50 +71,6 @@ def _separation(bp, rb, fx, fy, fz, p, R, ox, oy, oz):
             - p[1] - (R[1, 0] * ox + R[1, 1] * oy + R[1, 2] * oz),
             bp[2] + rb[2, 0] * fx + rb[2, 1] * fy + rb[2, 2] * fz
             - p[2] - (R[2, 0] * ox + R[2, 1] * oy + R[2, 2] * oz))
-
-
-@njit(cache=True)
-def _to_axis(d0, d1, d2, R, rl, i):
-    """The separation (d0, d1, d2) from contact i's local centre to a point, made relative
-    to the nearest point of the local axis when the contact has one (rl[i, RL_AXIS:], a
-    cylinder's side): returns the separation from that nearest point, the palm-frame axis u
-    and t, how far the nearest point lies along the axis from the centre. Without an axis,
-    u = 0 and t = 0 (a sphere)."""
-    a0, a1, a2 = rl[i, RL_AXIS], rl[i, RL_AXIS + 1], rl[i, RL_AXIS + 2]
-    if a0 == 0.0 and a1 == 0.0 and a2 == 0.0:
-        return d0, d1, d2, 0.0, 0.0, 0.0, 0.0
-    u0 = R[0, 0] * a0 + R[0, 1] * a1 + R[0, 2] * a2
-    u1 = R[1, 0] * a0 + R[1, 1] * a1 + R[1, 2] * a2
-    u2 = R[2, 0] * a0 + R[2, 1] * a1 + R[2, 2] * a2
-    t = d0 * u0 + d1 * u1 + d2 * u2
-    return d0 - t * u0, d1 - t * u1, d2 - t * u2, u0, u1, u2, t
-
-
-@njit(cache=True)
-def _axis_curvature(i, k_n, nf, dist, dv, u, a, R, jac, M, B, C):
-    """The Hessian terms a cylinder's axis adds to the pad-to-axis penalty: its direction
-    u = R a turns with the object. nf = k_c g (the penalty's force along dv); jac and M as
-    `_pair` left them for the pad centre and the axis point nearest it (where the
-    separation is normal to u). With U_b = R (e_b x a) and k_b = dv . U_b:
-    w-w: -nf (dist k_b k_c + (M_b . u) k_c + (M_c . u) k_b); theta_j-w_c: -nf (J_j . u) k_c;
-    p_b-w_c: nf u_b k_c (second derivatives of 1/2 k_c (|P_u v| - reach)^2)."""
-    # k_b = dv . R (e_b x a)
-    w0 = dv[0] * R[0, 0] + dv[1] * R[1, 0] + dv[2] * R[2, 0]    # R^T dv
-    w1 = dv[0] * R[0, 1] + dv[1] * R[1, 1] + dv[2] * R[2, 1]
-    w2 = dv[0] * R[0, 2] + dv[1] * R[1, 2] + dv[2] * R[2, 2]
-    k = (w2 * a[1] - w1 * a[2], w0 * a[2] - w2 * a[0], w1 * a[0] - w0 * a[1])
-    mdu = (M[0, 0] * u[0] + M[1, 0] * u[1] + M[2, 0] * u[2],    # M_b . u
-           M[0, 1] * u[0] + M[1, 1] * u[1] + M[2, 1] * u[2],
-           M[0, 2] * u[0] + M[1, 2] * u[1] + M[2, 2] * u[2])
-    for b in range(3):
-        for c in range(3):
-            C[3 + b, 3 + c] -= nf * (dist * k[b] * k[c] + mdu[b] * k[c] + mdu[c] * k[b])
-            C[b, 3 + c] += nf * u[b] * k[c]
-            C[3 + c, b] += nf * u[b] * k[c]
-    for j in range(k_n):
-        ju = jac[j, 0] * u[0] + jac[j, 1] * u[1] + jac[j, 2] * u[2]
-        for c in range(3):
-            B[i, j, 3 + c] -= nf * ju * k[c]
 
 
 @njit(cache=True)
@@ -246,17 +198,6 @@ def _spin_rate(i, k_n, th, rl, R, rb, vk):
 
 
 @njit(cache=True)
-def spin_offset(torque, tau_max, eps):
-    """The spin s0 [rad] at which the smoothed torsional friction tau_max s / sqrt(s^2 +
-    eps^2) gives `torque` (its share of the cone held under `SPIN_MEMORY_CLIP`); 0 without
-    a cone."""
-    if tau_max <= 0.0 or torque == 0.0:
-        return 0.0
-    t = min(max(torque / tau_max, -SPIN_MEMORY_CLIP), SPIN_MEMORY_CLIP)
-    return eps * t / math.sqrt(1.0 - t * t)
-
-
-@njit(cache=True)
 def _spin_apply(i, k_n, f1, f2, cx, jw0, jw1, jw2, gA, A, B, gC, C):
     """Accumulate an energy f(s) of the spin: gradient f'(s) J, Gauss-Newton Hessian
     f''(s) J J^T (J from `_spin_rate`)."""
@@ -275,7 +216,7 @@ def _spin_apply(i, k_n, f1, f2, cx, jw0, jw1, jw2, gA, A, B, gC, C):
 
 @njit(cache=True)
 def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
-              base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
+              base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
               omass, ocom, grav, flags, prm,
               gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk):
     """Energy of one particle (Eq. 6, 7 compliant, 8 as penalty or rolling, limits, gravity)
@@ -333,13 +274,8 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
             gfz = rb[0, 2] * grav[0] + rb[1, 2] * grav[1] + rb[2, 2] * grav[2]
             gb = grav[0] * base_pos[i, 0] + grav[1] * base_pos[i, 1] + grav[2] * base_pos[i, 2]
             for k in range(k_n):
-                # A link whose length this particle hypothesizes (an unknown length) is
-                # taken to be of the nominal link's make: its mass and its centre of mass
-                # along the link scale with the length (lseg: the lengths the masses were
-                # given for; 0 turns the scaling off). Nominal lengths give exactly 1.
-                sc = seg[i, k] / lseg[i, k] if lseg[i, k] > 0.0 else 1.0
-                m_k = lmass[i, k] * sc
-                cy, cz = lcom[i, k, 1], lcom[i, k, 2] * sc
+                m_k = lmass[i, k]
+                cy, cz = lcom[i, k, 1], lcom[i, k, 2]
                 py = qy[k] + cy * cphi[k] + cz * sphi[k]
                 pz = qz[k] - cy * sphi[k] + cz * cphi[k]
                 e -= m_k * (gb + gfx * lcom[i, k, 0] + gfy * py + gfz * pz)
@@ -404,15 +340,11 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                 # tau_max (sqrt(s^2 + eps^2) - eps) so that Newton sees a C2 energy. (An
                 # elliptic cone coupling it with the slide, as MuJoCo's, was measured by
                 # `vlr gap`: no better on average, and 3 of 30 wine glass solves failed.)
-                # A torque the pad stored by the last command change (`MotionConfig.
-                # spin_memory`) starts the curve at its offset s0: f'(0) is that torque.
                 tau = mu_t * rl[i, RL_FORCE]
                 eps = prm[P_SPIN_EPS]
-                s0 = spin_offset(rl[i, RL_SPIN_TORQUE], tau, eps)
-                x = s_sp + s0
-                r = math.sqrt(x * x + eps * eps)
-                e += tau * (r - (eps if s0 == 0.0 else math.sqrt(s0 * s0 + eps * eps)))
-                f1 += tau * x / r
+                r = math.sqrt(s_sp * s_sp + eps * eps)
+                e += tau * (r - eps)
+                f1 += tau * s_sp / r
                 f2 += tau * eps * eps / (r * r * r)
             if spin_on:
                 # The pad's elastic torsional stiffness (`MotionConfig.spin_stiffness`).
@@ -422,9 +354,7 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                 f2 += ks
             _pair(i, k_n, cfx, cfy, cfz, ax, ay, az, gam, G, 0.0, rb, R, qy, qz, jac, M,
                   vk[2], vk[0], gA, A, B, gC, C)
-            # Pad centre (fixed in D) to the local centre of curvature (fixed in O), or to
-            # the local axis of a cylinder (measured from its point nearest the pad centre,
-            # where the first derivatives of the axis's turn vanish).
+            # Pad centre (fixed in D) to the local centre of curvature (fixed in O).
             s_last, c_last = sphi[k_n - 1], cphi[k_n - 1]
             pcz = seg[i, k_n - 1]
             px = pad_xy[i, 0]
@@ -432,11 +362,6 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
             pz = qz[k_n - 1] - pad_xy[i, 1] * s_last + pcz * c_last
             d0, d1, d2 = _separation(base_pos[i], rb, px, py, pz, p, R,
                                      rl[i, 0], rl[i, 1], rl[i, 2])
-            d0, d1, d2, u0, u1, u2, t_ax = _to_axis(d0, d1, d2, R, rl, i)
-            ox = rl[i, 0] + t_ax * rl[i, RL_AXIS]
-            oy = rl[i, 1] + t_ax * rl[i, RL_AXIS + 1]
-            oz = rl[i, 2] + t_ax * rl[i, RL_AXIS + 2]
-            uv = (u0, u1, u2)
             dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
             reach = rl[i, RL_RHO] + pad_r[i]
             g = dist - reach
@@ -446,13 +371,10 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
             for a in range(3):
                 gam[a] = kc * g * dv[a]
                 for b in range(3):
-                    G[a, b] = kc * (sc * ((1.0 if a == b else 0.0) - uv[a] * uv[b])
+                    G[a, b] = kc * (sc * (1.0 if a == b else 0.0)
                                     + (reach / dist) * dv[a] * dv[b])
-            _pair(i, k_n, px, py, pz, ox, oy, oz, gam, G, 0.0, rb, R, qy, qz, jac, M,
-                  vk[2], vk[0], gA, A, B, gC, C)
-            if u0 != 0.0 or u1 != 0.0 or u2 != 0.0:
-                _axis_curvature(i, k_n, kc * g, dist, dv, uv, rl[i, RL_AXIS:RL_AXIS + 3],
-                                R, jac, M, B, C)
+            _pair(i, k_n, px, py, pz, rl[i, 0], rl[i, 1], rl[i, 2], gam, G, 0.0, rb, R, qy,
+                  qz, jac, M, vk[2], vk[0], gA, A, B, gC, C)
             if spin_on:
                 _spin_apply(i, k_n, f1, f2, cxs, j0, j1, j2, gA, A, B, gC, C)
         # Eq. 8 as a stiff penalty: the contact (fixed in D) stays at its anchor (fixed in O).
@@ -499,7 +421,7 @@ def _normal_force(i, th, seg, nrm, rl, p, R, base_pos, base_rot, pad_xy, pad_r, 
                   sphi, cphi, qy, qz):
     """Contact i's normal force in the rolling term at the current configuration [N]: k_c
     times how far finger i's pad sphere sinks into the object's local sphere (rl[i, :3]),
-    or its local cylinder (`_to_axis`)."""
+    """
     k_n = th.shape[1]
     _finger_chain(th[i], seg[i], nrm[i], pad_xy[i, 0], pad_xy[i, 1], pad_r[i], sphi, cphi,
                   qy, qz)
@@ -509,7 +431,6 @@ def _normal_force(i, th, seg, nrm, rl, p, R, base_pos, base_rot, pad_xy, pad_r, 
     pz = qz[k_n - 1] - pad_xy[i, 1] * s_last + pcz * c_last
     d0, d1, d2 = _separation(base_pos[i], base_rot[i], pad_xy[i, 0], py, pz, p, R,
                              rl[i, 0], rl[i, 1], rl[i, 2])
-    d0, d1, d2 = _to_axis(d0, d1, d2, R, rl, i)[:3]
     g = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - (rl[i, RL_RHO] + pad_r[i])
     return prm[P_KC] * max(0.0, -g)
 
@@ -646,7 +567,7 @@ def _rotate3(R, w0, w1, w2, out):
 
 @njit(cache=True)
 def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
-               base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
+               base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                omass, ocom, grav, flags, prm, max_iter,
                gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk,
                th_t, p_t, R_t, dth, dc, La, X, y, S, col, th0, p0):
@@ -668,7 +589,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
     for a in range(3):
         p0[a] = p[a]
     e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
-                  base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
+                  base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                   om, oc, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk)
     if not math.isfinite(e):
         return NONFINITE, 0
@@ -721,7 +642,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
             w0, w1, w2 = t * dc[3], t * dc[4], t * dc[5]
             _rotate3(R, w0, w1, w2, R_t)
             e_t = _evaluate(th_t, seg[q], nrm[q], anc[q], rl, p_t, R_t, stiff[q], kt[q], u,
-                            base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy,
+                            base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy,
                             pad_r, om, oc, grav, flags, prm, gA, gC, A, B, C, sphi, cphi,
                             qy, qz, jac, M, vk)
             if math.isfinite(e_t) and e_t <= e + 1e-4 * t * gd + tol_e:
@@ -748,7 +669,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                                               base_rot, pad_xy, pad_r, prm, sphi, cphi, qy,
                                               qz)):
                 e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
-                              base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy,
+                              base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy,
                               pad_r, om, oc, grav, flags, prm, gA, gC, A, B, C, sphi,
                               cphi, qy, qz, jac, M, vk)
             if t == 1.0:
@@ -766,7 +687,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
             if mu > 1e12:
                 break
             e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
-                          base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
+                          base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                           om, oc, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz,
                           jac, M, vk)
     # Jump check: a change far beyond what the action can cause means another branch.
@@ -786,7 +707,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
 
 @njit(parallel=True, cache=True, fastmath=False)
 def solve_batch(theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
-                base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
+                base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                 omass, ocom, grav, flags, prm, max_iter, active, status, iters):
     """Equilibrium (Eq. 9) of every active particle at tendon command u, in place; the
     object's mass omass (P,) and centre of mass ocom (P, 3) are per particle."""
@@ -826,7 +747,7 @@ def solve_batch(theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                 iters[q] = 0
                 continue
             st, it = _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
-                                base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg,
+                                base_pos, base_rot, radii, rest, lo, hi, lmass, lcom,
                                 pad_xy, pad_r, omass, ocom, grav, flags, prm, max_iter,
                                 gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk,
                                 th_t, p_t, R_t, dth, dc, La, X, y, S, col, th0, p0)
@@ -836,7 +757,7 @@ def solve_batch(theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
 
 @njit(cache=True)
 def evaluate_one(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
-                 base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
+                 base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                  omass, ocom, grav, flags, prm, gA, gC, A, B, C):
     """Energy, gradient and Hessian blocks of one particle (for tests and diagnostics)."""
     k_n = th.shape[1]
@@ -848,5 +769,5 @@ def evaluate_one(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
     M = np.empty((3, 3))
     vk = np.empty((6, 3))
     return _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
-                     base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, lseg, pad_xy, pad_r,
+                     base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                      omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk)

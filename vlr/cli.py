@@ -19,18 +19,6 @@ os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 COMMAND_GROUP = "vlr.commands"
-BACKEND_GROUP = "vlr.backends"
-
-
-def open_backend(name: str, **options):
-    """Open a `Hand` from the backend registered under `name` (entry-point group vlr.backends).
-
-    The synthetic world lives in `vlr` itself; `sim` and `hardware` plug in.
-    """
-    found = {ep.name: ep for ep in entry_points(group=BACKEND_GROUP)}
-    if name not in found:
-        raise UserError(f"unknown backend {name!r}; available: {', '.join(sorted(found))}")
-    return found[name].load()(**options)
 
 
 def build_parser() -> argparse.ArgumentParser:

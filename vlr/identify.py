@@ -1,4 +1,4 @@
-"""The self-identification loop (Algorithm 1, METHOD.md 3): grasp, observe, act, update until
+"""The self-identification loop (Algorithm 1, docs/METHOD.md 3): grasp, observe, act, update until
 the joint-angle intervals converge or the iteration budget runs out.
 
 Backend-agnostic: the loop sees a `world` that moves tendons (`grasp()`, `apply(delta)`,
@@ -17,7 +17,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Literal, Protocol
 
 import numpy as np
 
@@ -31,7 +31,7 @@ from vlr.motion import ObjectParams
 from vlr.observation import PoseObservation, TensionedObservation
 from vlr.synthetic import NominalGrasp, Truth
 
-__all__ = ["ActingWorld", "IdentifyConfig", "Estimate", "Score", "IdentifyResult", "identify"]
+__all__ = ["ActingWorld", "LoopConfig", "Estimate", "Score", "IdentifyResult", "identify"]
 
 
 class ActingWorld(Protocol):
@@ -43,18 +43,17 @@ class ActingWorld(Protocol):
 
 
 @dataclass(frozen=True)
-class IdentifyConfig:
-    """Loop settings.
+class LoopConfig:
+    """The loop's settings (units in the names).
 
     Attributes:
         max_iterations: actions after the first observation.
         min_iterations: do not stop on convergence before this many actions.
-        action_range: exploratory tendon-change magnitude range [m] (random sign).
-        action_band: commands stay within this distance of the grasp command [m]
-            (vlr.explore: a long random walk would slacken a tendon or crush the object).
-        stop_on_convergence: stop once the 95% interval criterion holds (METHOD.md 3).
-        filter: particle-filter settings.
-        action_seed: seed of the action Generator (None: the filter's seed + 1).
+        action_range_mm: (low, high) magnitude of each tendon's exploratory change, random
+            sign (`vlr.explore`; 0.2-0.4 mm: 4-8 N at 20 N/mm).
+        action_band_mm: commands stay within this of the grasp command (at least the
+            range's high end): a long random walk would slacken a tendon or crush the object.
+        stop_on_convergence: stop once the 95% interval criterion holds (docs/METHOD.md 3).
         exploration: "random" (the paper) or "active" (`vlr.active`: the candidate whose
             predicted POM poses disagree most across the particles).
         active: settings of the active choice.
@@ -64,19 +63,30 @@ class IdentifyConfig:
 
     max_iterations: int = 40
     min_iterations: int = 0
-    action_range: tuple[float, float] = (0.2e-3, 0.4e-3)
-    action_band: float = 0.4e-3
-    first_observation_frames: int = 30
+    action_range_mm: tuple[float, float] = (0.2, 0.4)
+    action_band_mm: float = 0.4
     stop_on_convergence: bool = True
-    filter: FilterConfig = field(default_factory=FilterConfig)
-    action_seed: int | None = None
-    exploration: str = "random"
+    exploration: Literal["random", "active"] = "random"
     active: ActiveExploration = field(default_factory=ActiveExploration)
+    first_observation_frames: int = 30
 
     def __post_init__(self) -> None:
+        if self.max_iterations < 0:
+            raise ValueError(f"max_iterations {self.max_iterations} must be >= 0")
+        if not 0 <= self.min_iterations <= self.max_iterations:
+            raise ValueError(f"min_iterations {self.min_iterations} must be in "
+                             f"[0, max_iterations={self.max_iterations}]")
+        lo, hi = self.action_range_mm
+        if not 0 < lo <= hi <= 2.0:
+            raise ValueError(f"action_range_mm {list(self.action_range_mm)} must be [low, "
+                             "high] with 0 < low <= high <= 2 (larger moves drop objects)")
+        if not (self.action_band_mm > 0 and self.action_band_mm < float("inf")):
+            raise ValueError(f"action_band_mm {self.action_band_mm} must be > 0")
         if self.exploration not in ("random", "active"):
-            raise ValueError(f"exploration {self.exploration!r}: expected 'random' or "
-                             "'active'")
+            raise ValueError(f"exploration {self.exploration!r}: use random or active")
+        if self.first_observation_frames < 1:
+            raise ValueError(f"first_observation_frames {self.first_observation_frames} "
+                             "must be >= 1")
 
 
 @dataclass(frozen=True)
@@ -153,8 +163,6 @@ def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
     base = len(post.mean) - len(pf.unknowns)
     ue, uc, ue_med = {}, {}, {}
     for j, u in enumerate(pf.unknowns):
-        if u.kind == "noise":  # the likelihood's own scale: no true value to score
-            continue
         if u.kind == "curvature" and getattr(truth, "surface_curvature", None) is None:
             continue  # a mesh object: the world does not say
         if u.kind == "stiffness":
@@ -177,8 +185,8 @@ def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
 
 def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
              model: HandModel, obj: ObjectParams, nominal: NominalGrasp,
-             config: IdentifyConfig | None = None,
-             truth: Callable[[], Truth] | None = None,
+             filter_config: FilterConfig | None = None, loop: LoopConfig | None = None,
+             seed: int = 0, truth: Callable[[], Truth] | None = None,
              progress: Callable[[IterationRecord], None] | None = None,
              watch: Callable[[ParticleFilter, IterationRecord], None] | None = None,
              ) -> IdentifyResult:
@@ -191,26 +199,27 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
         obj: object mass and centre of mass.
         nominal: nominal grasp guess (angles, contacts) for the prior; its command is not used
             (the world's grasp() reports u_0).
-        config: loop settings.
+        filter_config: the particle filter's settings.
+        loop: the loop's settings.
+        seed: seeds the filter (`seed`) and the actions (`seed + 1`).
         truth: ground truth callable for SCORING ONLY.
         progress: called with each IterationRecord (e.g. a progress bar).
         watch: called with the filter and each IterationRecord after the update (e.g. a
             live 3D view of the particles); it must not change the filter.
     """
-    cfg = config or IdentifyConfig()
-    pf = ParticleFilter(model, obj, cfg.filter)
-    action_rng = np.random.default_rng(cfg.filter.seed + 1 if cfg.action_seed is None
-                                       else cfg.action_seed)
+    cfg = loop or LoopConfig()
+    pf = ParticleFilter(model, obj, filter_config, seed)
+    action_rng = np.random.default_rng(seed + 1)
     report = world.grasp()
     u = report_commands(report)
-    weigh_tensions = cfg.filter.observation.sigma_tension > 0
+    weigh_tensions = pf.obs_model.sigma_tension > 0
     if weigh_tensions and getattr(report, "tensions", None) is None:
         raise UserError("the likelihood weighs tendon tensions (sigma_tension), and this "
                         "hand does not report them: set it to 0")
     tensions = getattr(report, "tensions", None)
     center = u.copy()
-    explore = ExplorationRange(low=cfg.action_range[0], high=cfg.action_range[1],
-                               band=max(cfg.action_band, cfg.action_range[1]))
+    lo, hi = (v * 1e-3 for v in cfg.action_range_mm)
+    explore = ExplorationRange(low=lo, high=hi, band=max(cfg.action_band_mm * 1e-3, hi))
     obs = observer()
     tries = 1
     while obs is None:  # the filter needs one pose to anchor its particles

@@ -1,5 +1,6 @@
 """How much an identification run can know: the Bayesian Cramér-Rao bound of the filter's
-own model along a command sequence (METHOD.md 3, 8.2; issue #5's convergence target).
+own model along a command sequence (docs/METHOD.md 3, 8.2): the floor of the paper's
+convergence measure.
 
 The filter's state is the vector x of its sampled dimensions (`ParticleFilter.pack`: joint
 angles, pad contact angles, unknowns). A particle takes the observed POM pose at the grasp,
@@ -129,7 +130,7 @@ class InformationTrace:
         self.info_pos = np.zeros((d, d))
         self.info_rot = np.zeros((d, d))
         # Each observation's H (6, D) and the grasp's turn v (6,) there, for the turn term.
-        self.opposed = pf.config.observation.opposed
+        self.opposed = pf.obs_model.opposed
         self._jacobians: list[np.ndarray] = []
         self._turns: list[np.ndarray] = []
         self.info_tension = np.zeros((d, d))  # sum of G_s^T G_s (module docstring)

@@ -53,6 +53,7 @@ __all__ = [
     "TERMS",
     "STATUS",
     "MotionConfig",
+    "PadFriction",
     "ObjectParams",
     "ParticleState",
     "MotionModel",
@@ -74,7 +75,7 @@ TERMS: dict[str, int] = {
 
 # Where the object's mass and centre of mass sit in `MotionModel._shared` (the kernel's
 # arguments after the hand's): replaced per call by the particles' own (`_shared_for`).
-_OBJECT_MASS, _OBJECT_COM = 11, 12
+_OBJECT_MASS, _OBJECT_COM = 10, 11
 
 # A frictional solve first relaxes the grasp at the old command, with this many times the
 # iterations of a solve (`MotionModel._solve`).
@@ -89,10 +90,20 @@ class MotionConfig:
     """Settings of the motion model (units in brackets).
 
     Attributes:
-        terms: energy terms to include (keys of `TERMS`).
+        terms: energy terms to include (keys of `TERMS` but "rolling").
+        rolling: rolling contacts (module docstring, `vlr.surface`) instead of pinned ones;
+            needs "contacts" among the terms.
+        rolling_substeps: with rolling, a command change given its start
+            (`MotionModel.solve(..., u_from=)`) is split into this many solves, the contacts
+            rolled after each: within a solve the previous contact points are held, which
+            is exact only while the pad turns little (measured by `vlr gap`).
+        follow_substeps: a particle whose solve of a command change (`solve(...,
+            u_from=)`) does not converge or leaves the jump limits is solved again from
+            its start in this many equal steps, each held to the jump limits: a large but
+            continuous move is followed, a jump to another branch still fails. 0 turns it
+            off. The synthetic world calls a move a snap by the same test (`vlr.synthetic`).
         contact_stiffness: penalty k_c tying contacts to anchors [N/m]. 1e6 N/m leaves
-            10 um of penetration at 10 N; METHOD.md 8.2 used 1e7 (1e4 N/mm), which this
-            solver also handles, with more rejected line-search trials.
+            10 um of penetration at 10 N.
         limit_stiffness: one-sided joint-limit penalty [N m/rad]; 100 lets a spring preload
             of ~0.02 N m sink 0.01 degree into a stop.
         gravity: gravity vector in the palm frame [m/s^2]; default palm up.
@@ -104,77 +115,12 @@ class MotionConfig:
         jump_theta: a solve that moves any joint more than this is another branch [rad].
         jump_pos: ... or moves the POM more than this [m].
         mu0: initial Levenberg-Marquardt damping (relative to the Hessian diagonal).
-        rolling_substeps: with "rolling" in `terms`, a command change given its start
-            (`MotionModel.solve(..., u_from=)`) is split into this many solves, the contacts
-            rolled after each: within a solve the previous contact points are held, which
-            is exact only while the pad turns little (measured by `vlr gap`).
-        spin_stiffness: with rolling, the pad's torsional stiffness about the contact
-            normal [N m/rad]; 0 lets the object spin freely on the pads.
-        slide_friction: with rolling, the pads' sliding friction coefficient mu: a contact
-            sticks (the penalty k_c) until its tangential force reaches mu times its normal
-            force, then slides; after each solve its stretch is returned onto the cone
-            (`vlr.surface.roll_contacts`). The normal force is each contact's penalty
-            stretch, updated during the first half of the Newton iterations so that the
-            grasp can wedge. inf: contacts never slide (the model before friction). The
-            sim's pads have 1.0 (`sim.pads.SLIDE_FRICTION`).
-        spin_friction: with rolling, the pads' torsional friction coefficient mu_t [m]: a
-            pad sticks about its contact normal until the spin torque reaches mu_t times
-            its normal force, then slips (rate-independent Coulomb friction as an
-            incremental dissipation potential, `vlr._energy_kernels._evaluate`). The sim's pads
-            have 1 mm (`sim.pads.TORSION_FRICTION`); 0 lets them spin freely.
-            Friction acts on a command change (`solve(..., u_from=)`) only: a settle has no
-            history, so its contacts stick and spin freely as before.
-        cone_return: with rolling and without the pads' friction in the energy, the
-            sliding friction coefficient mu of one return-map step after each action: the
-            command change (`solve(..., u_from=)`) is solved with glued contacts, then each
-            contact's stretch is returned onto its cone mu N (`vlr.surface.roll_contacts`)
-            and the grasp settled again, glued, at the new command. The settle loads the
-            contacts again, less than before: one step goes part of the way from the glued
-            equilibrium to the frictional one (repeated, the steps converge to it; on the
-            test grasp one step goes about a third of the way). Measured by `vlr gap` as
-            its own rung (RESULTS.md 5); its cost is one settle, where the friction's Huber
-            energy costs 3-5x the solve. inf: off. The sim's pads have 1.0
-            (`sim.pads.SLIDE_FRICTION`).
-        spin_memory: with the pads' torsional friction, each pad keeps the spin torque its
-            stick held at the end of a command change into the next one
-            (`ParticleState.spin_torque`), as its tangential stick keeps its force in the
-            stretch: a pad that slipped one way slips on at once under more of the same
-            torque and sticks through twice the cone the other way. False: every command
-            change starts each pad at zero spin torque, so a particle's first step at the
-            old command rebalances the torques it dropped. A settle spins the pads freely
-            and zeroes them either way.
-        exact_cylinder: with rolling, a pad on a cylinder's side is held at rho + r from
-            the cylinder's local axis, as it is; False: from the centre of a sphere of the
-            cylinder's radius, exact across the axis and too curved along it (with a 12 mm
-            pad on the screwdriver's 16 mm handle a roll along the axis would turn the
-            object 1.75 times too far). Spheres and planes are the same either way.
-        spin_smoothing: the spin [rad] over which the friction's |s| is rounded off
-            (Newton needs a smooth energy); the stick's compliance is tau_max over it.
-        follow_substeps: a particle whose solve of a command change (`solve(...,
-            u_from=)`) does not converge or leaves the jump limits is solved again from
-            its start in this many equal steps, each held to the jump limits: a large but
-            continuous move is followed, a jump to another branch still fails. Measured on
-            the pinned synthetic grasp: a 0.3 mm action turned a joint 38 degrees
-            continuously, and the one-solve test dropped the truth. 0 turns it off. The
-            synthetic world calls a move a snap by the same test (`vlr.synthetic`).
-        link_scaling: a link whose length a particle hypothesizes (an unknown length,
-            `vlr.filter.Unknown`) has the nominal link's make: its mass and its centre of
-            mass along the link scale with the length (the distal link with its pad's
-            offset). False: every link keeps the nominal mass and centre of mass whatever
-            its length. Nominal lengths are unchanged either way. Off by default: on
-            NH1 it did not move the pad offset's error (docs/RESULTS.md section 2).
     """
 
     terms: tuple[str, ...] = ("springs", "tendon", "limits", "link_gravity",
                               "object_gravity", "contacts")
+    rolling: bool = True
     rolling_substeps: int = 4
-    spin_stiffness: float = 0.0
-    slide_friction: float = math.inf
-    spin_friction: float = 0.0
-    spin_memory: bool = False
-    exact_cylinder: bool = False
-    cone_return: float = math.inf
-    spin_smoothing: float = 1e-3
     follow_substeps: int = 16
     contact_stiffness: float = 1e6
     limit_stiffness: float = 100.0
@@ -187,56 +133,42 @@ class MotionConfig:
     jump_theta: float = 0.25
     jump_pos: float = 0.01
     mu0: float = 1e-6
-    link_scaling: bool = False
 
     def __post_init__(self) -> None:
-        known = set(TERMS)
+        object.__setattr__(self, "terms", tuple(self.terms))
+        known = set(TERMS) - {"rolling"}
         unknown = set(self.terms) - known
         if unknown:
-            raise ValueError(f"unknown energy terms {sorted(unknown)}; known: {sorted(known)}")
-        if "rolling" in self.terms and "contacts" not in self.terms:
-            raise ValueError("the 'rolling' term moves the contacts of the 'contacts' term: "
-                             "it needs 'contacts' too")
-        if not (np.isfinite(self.spin_stiffness) and self.spin_stiffness >= 0):
-            raise ValueError(f"spin_stiffness {self.spin_stiffness!r} N m/rad must be >= 0")
-        if not (self.slide_friction > 0):
-            raise ValueError(f"slide_friction {self.slide_friction!r} must be > 0 (inf: no "
-                             "sliding)")
-        if not (self.cone_return > 0):
-            raise ValueError(f"cone_return {self.cone_return!r} must be > 0 (inf: off)")
-        if not (np.isfinite(self.spin_friction) and self.spin_friction >= 0):
-            raise ValueError(f"spin_friction {self.spin_friction!r} m must be >= 0")
-        if not (np.isfinite(self.spin_smoothing) and self.spin_smoothing > 0):
-            raise ValueError(f"spin_smoothing {self.spin_smoothing!r} rad must be > 0")
+            raise ValueError(f"unknown energy terms {sorted(unknown)}; known: {sorted(known)}"
+                             " (rolling contacts: rolling=True)")
+        if self.rolling and "contacts" not in self.terms:
+            raise ValueError("rolling moves the contacts of the 'contacts' term: it needs "
+                             "'contacts' too")
         if not (isinstance(self.follow_substeps, int) and self.follow_substeps >= 0):
             raise ValueError(f"follow_substeps {self.follow_substeps!r} must be an integer "
                              ">= 0")
         if not (isinstance(self.rolling_substeps, int) and self.rolling_substeps >= 1):
             raise ValueError(f"rolling_substeps {self.rolling_substeps!r} must be an "
                              "integer >= 1")
-
-    @property
-    def rolling(self) -> bool:
-        return "rolling" in self.terms
-
-    @property
-    def friction(self) -> bool:
-        """Rolling contacts with the pads' friction (sliding or torsional) on."""
-        return self.rolling and (math.isfinite(self.slide_friction) or self.spin_friction > 0)
-
-    def with_rolling(self, on: bool = True) -> MotionConfig:
-        """This configuration with the rolling term switched on (or off)."""
-        from dataclasses import replace
-        terms = tuple(t for t in self.terms if t != "rolling")
-        return replace(self, terms=terms + (("rolling",) if on else ()))
+        for name in ("contact_stiffness", "limit_stiffness", "tol_theta", "tol_pos",
+                     "max_step_theta", "max_step_pos", "jump_theta", "jump_pos", "mu0"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} {v!r} must be finite and > 0")
+        if not (isinstance(self.max_iter, int) and self.max_iter >= 1):
+            raise ValueError(f"max_iter {self.max_iter!r} must be an integer >= 1")
 
     def flags(self) -> np.ndarray:
         out = np.zeros(kern.N_TERMS, dtype=np.int64)
         for t in self.terms:
             out[TERMS[t]] = 1
+        if self.rolling:
+            out[kern.ROLLING] = 1
         return out
 
-    def params(self) -> np.ndarray:
+    def params(self, friction: PadFriction | None = None) -> np.ndarray:
+        """The kernel's parameter vector, with the pads' `friction` (None: none)."""
+        friction = friction or PadFriction()
         prm = np.zeros(kern.N_PRM)
         prm[kern.P_KC] = self.contact_stiffness
         prm[kern.P_KLIM] = self.limit_stiffness
@@ -247,11 +179,58 @@ class MotionConfig:
         prm[kern.P_JUMP_TH] = self.jump_theta
         prm[kern.P_JUMP_P] = self.jump_pos
         prm[kern.P_MU0] = self.mu0
-        prm[kern.P_KSPIN] = self.spin_stiffness
-        prm[kern.P_SLIDE_FRICTION] = self.slide_friction
-        prm[kern.P_SPIN_FRICTION] = self.spin_friction
-        prm[kern.P_SPIN_EPS] = self.spin_smoothing
+        prm[kern.P_KSPIN] = friction.spin_stiffness
+        prm[kern.P_SLIDE_FRICTION] = friction.slide
+        prm[kern.P_SPIN_FRICTION] = friction.spin
+        prm[kern.P_SPIN_EPS] = friction.spin_smoothing
         return prm
+
+
+@dataclass(frozen=True)
+class PadFriction:
+    """The pads' friction in the rolling contacts: a term of `vlr gap`'s model ladder
+    (sim/gap.py), which measures what each term of the model explains; not a setting of the
+    filter (measured, not adopted: docs/DECISIONS.md).
+
+    Attributes:
+        slide: the pads' sliding friction coefficient mu: a contact sticks (the penalty k_c)
+            until its tangential force reaches mu times its normal force, then slides; after
+            each solve its stretch is returned onto the cone (`vlr.surface.roll_contacts`).
+            The normal force is each contact's penalty stretch, updated during the first
+            half of the Newton iterations so that the grasp can wedge. inf: never slides.
+        spin: the pads' torsional friction coefficient mu_t [m]: a pad sticks about its
+            contact normal until the spin torque reaches mu_t times its normal force, then
+            slips (rate-independent Coulomb friction as an incremental dissipation
+            potential, `vlr._energy_kernels._evaluate`); 0 lets them spin freely.
+        spin_stiffness: the pad's elastic torsional stiffness about the contact normal
+            [N m/rad]; 0: none.
+        spin_smoothing: the spin [rad] over which the friction's |s| is rounded off (Newton
+            needs a smooth energy); the stick's compliance is tau_max over it.
+
+    Friction acts on a command change (`MotionModel.solve(..., u_from=)`) only: a settle has
+    no history, so its contacts stick and spin freely. The sim's pads have mu 1.0 and mu_t
+    1 mm (`sim.pads`).
+    """
+
+    slide: float = math.inf
+    spin: float = 0.0
+    spin_stiffness: float = 0.0
+    spin_smoothing: float = 1e-3
+
+    def __post_init__(self) -> None:
+        if not self.slide > 0:
+            raise ValueError(f"slide friction {self.slide!r} must be > 0 (inf: no sliding)")
+        if not (np.isfinite(self.spin) and self.spin >= 0):
+            raise ValueError(f"spin friction {self.spin!r} m must be >= 0")
+        if not (np.isfinite(self.spin_stiffness) and self.spin_stiffness >= 0):
+            raise ValueError(f"spin stiffness {self.spin_stiffness!r} N m/rad must be >= 0")
+        if not (np.isfinite(self.spin_smoothing) and self.spin_smoothing > 0):
+            raise ValueError(f"spin smoothing {self.spin_smoothing!r} rad must be > 0")
+
+    @property
+    def on(self) -> bool:
+        """Sliding or torsional friction (not the elastic spin stiffness alone)."""
+        return math.isfinite(self.slide) or self.spin > 0
 
 
 @dataclass(frozen=True)
@@ -284,11 +263,6 @@ class ParticleState:
         stiffness: (P, N, K) joint spring rates [N m/rad].
         tendon: (P, N) series tendon stiffness [N/m].
         valid: (P,) False once a solve failed: zero weight.
-        noise: (P,) each particle's factor on the likelihood's pose scales (1: the scales
-            as configured; `vlr.observation`); sampled when the model error's size is an
-            unknown ("noise", `vlr.filter.parse_unknown`). The motion model ignores it.
-        spin_torque: (P, N) the spin torque each pad's torsional friction holds [N m]
-            (`MotionConfig.spin_memory`; 0 without it).
         object_mass: (P,) the object's mass [kg] when it is an unknown ("mass",
             `vlr.filter.parse_unknown`); None: the motion model's `ObjectParams`.
         object_com: (P, 3) the object's centre of mass in O [m] when an unknown ("com:x",
@@ -307,8 +281,6 @@ class ParticleState:
     stiffness: np.ndarray
     tendon: np.ndarray
     valid: np.ndarray
-    noise: np.ndarray
-    spin_torque: np.ndarray
     object_mass: np.ndarray | None = None
     object_com: np.ndarray | None = None
     surface_curvature: np.ndarray | None = None
@@ -364,8 +336,7 @@ class ParticleState:
                  segments=np.broadcast_to(model.segments, (n, nf, nk)).copy(),
                  stiffness=np.broadcast_to(model.stiffness, (n, nf, nk)).copy(),
                  tendon=np.full((n, nf), model.tendon_stiffness),
-                 valid=np.ones(n, dtype=bool), noise=np.ones(n),
-                 spin_torque=np.zeros((n, nf)))
+                 valid=np.ones(n, dtype=bool))
         st.anchor_to_pose(model)
         return st
 
@@ -432,91 +403,75 @@ def rotvec_to_matrix(w: np.ndarray) -> np.ndarray:
 
 
 class MotionModel:
-    """Gamma: (state, u) -> equilibrium state (Eq. 4, 9), batched over particles."""
+    """Gamma: (state, u) -> equilibrium state (Eq. 4, 9), batched over particles.
+
+    Args:
+        model: the hand; obj: the object (its mass, centre of mass and local surface).
+        config: the model's settings.
+        friction: the pads' friction with rolling contacts (`PadFriction`; `vlr gap` only).
+    """
 
     def __init__(self, model: HandModel, obj: ObjectParams,
-                 config: MotionConfig | None = None) -> None:
+                 config: MotionConfig | None = None,
+                 friction: PadFriction | None = None) -> None:
         self.model = model
         self.obj = obj
         self.config = config or MotionConfig()
+        self.friction = friction or PadFriction()
         lim = model.limits
         self._shared = (
             np.ascontiguousarray(model.base_pos), np.ascontiguousarray(model.base_rot),
             np.ascontiguousarray(model.radii), np.ascontiguousarray(model.rest),
             np.ascontiguousarray(lim[..., 0]), np.ascontiguousarray(lim[..., 1]),
             np.ascontiguousarray(model.link_masses), np.ascontiguousarray(model.link_coms),
-            np.ascontiguousarray(model.segments if self.config.link_scaling
-                                 else np.zeros_like(model.segments)),   # lseg: [8]
             np.ascontiguousarray(model.pad_center[:, :2]),
             np.ascontiguousarray(model.pad_radius),
             float(obj.mass), np.asarray(obj.com, dtype=float),   # per particle: _shared_for
             np.asarray(self.config.gravity, dtype=float))
         self._flags = self.config.flags()
         self._prm = self._params(self.config)
-        self._lseg_off = np.zeros_like(self._shared[8])
-        self._lseg_on = np.ascontiguousarray(model.segments)
         self._prm_settle = self._params(self.config, history=False)
         self._no_roll = np.zeros((1, model.n_fingers, kern.N_RL))
         self._own_object: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def _params(self, cfg: MotionConfig, history: bool = True) -> np.ndarray:
         """The kernel's parameters; without `history` (a settle) without friction."""
+        friction = self.friction
         if not history:
-            cfg = replace(cfg, slide_friction=math.inf, spin_friction=0.0)
-        return cfg.params()
+            friction = replace(friction, slide=math.inf, spin=0.0)
+        return cfg.params(friction)
 
     def rolling_frames(self, state: ParticleState, normals_o: np.ndarray | None = None,
-                       forces: bool = True, exact_cylinder: bool | None = None) -> np.ndarray:
-        """(P, N, 21) what the rolling term holds fixed during a solve: each contact's local
-        centre of curvature in O, a - rho m (and a cylinder's axis with `exact_cylinder`,
-        by default the model's `MotionConfig.exact_cylinder`; `vlr.surface.local_centres`),
-        its normal in the palm frame, R m (m: the
-        object's outward normal at the contact, in O), the finger's summed joint angles, the
-        object's rotation (for the spin term), the contact's normal force
-        (`normal_forces`; it sets the friction's limits; 0 if not `forces`) and the spin
-        torque the pad holds (`ParticleState.spin_torque`), and the local radius of curvature
-        (`contact_rho`). `normals_o`: m if already computed (`vlr.surface.surface_normals`)."""
+                       forces: bool = True) -> np.ndarray:
+        """(P, N, `kern.N_RL`) what the rolling term holds fixed during a solve: each
+        contact's local centre of curvature in O, a - rho m (`vlr.surface.local_centres`),
+        its normal in the palm frame, R m (m: the object's outward normal at the contact, in
+        O), the finger's summed joint angles, the object's rotation (for the spin term), the
+        contact's normal force (`normal_forces`; it sets the friction's limits; 0 if not
+        `forces`) and the local radius of curvature (`contact_rho`). `normals_o`: m if
+        already computed (`vlr.surface.surface_normals`)."""
         m = (surface_normals(self.model, state.theta, state.normals, state.rot)
              if normals_o is None else normals_o)
         out = np.empty(m.shape[:2] + (kern.N_RL,))
         rho = self.contact_rho(state)
-        (out[..., kern.RL_CENTRE:kern.RL_CENTRE + 3],
-         out[..., kern.RL_AXIS:kern.RL_AXIS + 3]) = local_centres(
-            self.obj.surface, state.anchors, m,
-            self.config.exact_cylinder if exact_cylinder is None else exact_cylinder, rho)
+        out[..., kern.RL_CENTRE:kern.RL_CENTRE + 3] = local_centres(
+            self.obj.surface, state.anchors, m, rho)
         out[..., kern.RL_RHO] = self.obj.surface.kernel_radius if rho is None else rho
         out[..., kern.RL_NORMAL:kern.RL_NORMAL + 3] = np.einsum("pab,pnb->pna", state.rot, m)
         out[..., kern.RL_PHI] = state.theta.sum(axis=-1)
         out[..., kern.RL_ROT:kern.RL_ROT + 9] = state.rot.reshape(-1, 1, 9)
         out[..., kern.RL_FORCE] = self.normal_forces(state, out) if forces else 0.0
-        out[..., kern.RL_SPIN_TORQUE] = state.spin_torque
         return out
-
-    def _store_spin_torques(self, state: ParticleState, roll: np.ndarray,
-                            cfg: MotionConfig) -> None:
-        """`MotionConfig.spin_memory`: each valid particle's pad spin torques at the end of
-        a frictional solve, f'(s) of the kernel's torsional friction at the spin s since
-        the solve's start (`roll`: its frames, the normal forces as the solve left them)."""
-        ok = state.valid
-        rl = roll[ok]
-        spin = pad_spins(self.model, rl, state.theta[ok], state.rot[ok])
-        tau = cfg.spin_friction * rl[..., kern.RL_FORCE]
-        eps = cfg.spin_smoothing
-        t = np.clip(np.divide(rl[..., kern.RL_SPIN_TORQUE], tau, out=np.zeros_like(tau),
-                              where=tau > 0), -kern.SPIN_MEMORY_CLIP, kern.SPIN_MEMORY_CLIP)
-        x = spin + eps * t / np.sqrt(1.0 - t * t)
-        state.spin_torque[ok] = tau * x / np.sqrt(x * x + eps * eps)
 
     def normal_forces(self, state: ParticleState, frames: np.ndarray) -> np.ndarray:
         """(P, N) each contact's normal force in the rolling term [N]: k_c times how far the
-        pad sphere sinks into the object's local sphere or cylinder (the rolling `frames`'
-        centres and axes in O, radii rho), 0 where they part."""
+        pad sphere sinks into the object's local sphere (the rolling `frames`' centres in O,
+        radii rho), 0 where they part."""
         centre = contact_points(self.model, state.theta, np.zeros_like(state.normals),
                                 state.segments)
         local = state.pos[:, None, :] + np.einsum(
             "pab,pnb->pna", state.rot, frames[..., kern.RL_CENTRE:kern.RL_CENTRE + 3])
-        axes = np.einsum("pab,pnb->pna", state.rot, frames[..., kern.RL_AXIS:kern.RL_AXIS + 3])
-        gap = pad_gaps(centre, local, axes, frames[..., kern.RL_RHO] + self.model.pad_radius)
+        gap = pad_gaps(centre, local, frames[..., kern.RL_RHO] + self.model.pad_radius)
         return self.config.contact_stiffness * np.maximum(0.0, -gap)
 
     def contact_rho(self, state: ParticleState) -> np.ndarray | None:
@@ -542,10 +497,9 @@ class MotionModel:
 
     def _shared_for(self, cfg: MotionConfig, state: ParticleState) -> tuple:
         """The kernel's shared arrays for `cfg` and `state`: the model's own, but with the
-        gravity and the link scaling a per-call config asks for, and the particles' object
-        masses and centres of mass."""
+        gravity a per-call config asks for, and the particles' object masses and centres of
+        mass."""
         shared = list(self._shared)
-        shared[8] = self._lseg_on if cfg.link_scaling else self._lseg_off
         shared[_OBJECT_MASS], shared[_OBJECT_COM] = self.object_arrays(state)
         shared[-1] = np.asarray(cfg.gravity, dtype=float)
         return tuple(shared)
@@ -575,25 +529,7 @@ class MotionModel:
         status, iters = self._solve(state, u, cfg, config is not None, u_from)
         if follow:
             self._follow(state, start, u, u_from, cfg, status, iters)
-        if (u_from is not None and cfg.rolling and not cfg.friction
-                and math.isfinite(cfg.cone_return)):
-            self._cone_return(state, u, cfg, config is not None, status, iters)
         return status, iters
-
-    def _cone_return(self, state: ParticleState, u: np.ndarray, cfg: MotionConfig,
-                     custom: bool, status: np.ndarray, iters: np.ndarray) -> None:
-        """`MotionConfig.cone_return`: the valid particles' contact stretch returned onto
-        the cone, then a glued settle at `u` (in place; a particle that fails the settle
-        takes its status)."""
-        if not state.valid.any():
-            return
-        self.roll(state, surface_normals(self.model, state.theta, state.normals, state.rot),
-                  cfg.cone_return, cfg.exact_cylinder)
-        was = state.valid.copy()
-        st2, it2 = self._solve(state, u, cfg, custom, None)
-        iters += it2
-        lost = was & ~state.valid
-        status[lost] = st2[lost]
 
     def _solve(self, state: ParticleState, u: np.ndarray, cfg: MotionConfig, custom: bool,
                u_from: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
@@ -612,23 +548,23 @@ class MotionModel:
         it = np.empty(state.n, dtype=np.int32)
         step_status = np.empty(state.n, dtype=np.int8)
         budgets = [int(cfg.max_iter)] * len(targets)
-        if history and cfg.rolling and math.isfinite(cfg.slide_friction):
+        slide = self.friction.slide
+        if history and cfg.rolling and math.isfinite(slide):
             # A settle holds its contacts whatever the force. Friction first returns their
             # stretch onto the cone, as the world's contacts would have slid, and lets the
             # grasp find its frictional equilibrium at the old command: after a settle that
             # can be a large move (measured: a joint 11 degrees, 170 iterations), after a
             # frictional solve it takes one or two iterations.
             self.roll(state, surface_normals(self.model, state.theta, state.normals,
-                                             state.rot), cfg.slide_friction,
-                      cfg.exact_cylinder)
+                                             state.rot), slide)
             targets = [np.ascontiguousarray(u_from, dtype=float)] + targets
             budgets = [RELAX_ITERATIONS * int(cfg.max_iter)] + budgets
         for j, target in enumerate(targets):
             before = surface_normals(self.model, state.theta, state.normals, state.rot) \
                 if cfg.rolling else None
             # Only friction reads the normal forces (a settle has none).
-            roll = (self.rolling_frames(state, before, forces=history and cfg.friction,
-                                        exact_cylinder=cfg.exact_cylinder)
+            roll = (self.rolling_frames(state, before,
+                                        forces=history and self.friction.on)
                     if cfg.rolling else self._no_roll)
             kern.solve_batch(state.theta, state.segments, state.normals, state.anchors,
                              roll, state.pos, state.rot, state.stiffness, state.tendon, target,
@@ -643,12 +579,7 @@ class MotionModel:
                 status[state.valid] = step_status[state.valid]
             state.valid &= step_status == kern.OK
             if cfg.rolling:
-                if history and cfg.spin_memory and cfg.spin_friction > 0:
-                    self._store_spin_torques(state, roll, cfg)
-                elif not history:
-                    state.spin_torque[state.valid] = 0.0  # the settle's pads spin freely
-                self.roll(state, before, cfg.slide_friction if history else math.inf,
-                          cfg.exact_cylinder)
+                self.roll(state, before, slide if history else math.inf)
         return status, iters
 
     def _follow(self, state: ParticleState, start: ParticleState, u: np.ndarray,
@@ -680,7 +611,7 @@ class MotionModel:
             status[idx[ok]] = kern.OK
 
     def roll(self, state: ParticleState, normals_before: np.ndarray,
-             slide_friction: float = math.inf, exact_cylinder: bool | None = None) -> None:
+             slide_friction: float = math.inf) -> None:
         """Move the valid particles' contacts to where their pads now touch the object
         (`vlr.surface.roll_contacts`), a contact's stretch returned onto its friction cone
         (`slide_friction`)."""
@@ -691,8 +622,7 @@ class MotionModel:
         n, a = roll_contacts(self.model, self.obj.surface, state.theta[ok], state.normals[ok],
                              state.anchors[ok], state.pos[ok], state.rot[ok],
                              state.segments[ok], normals_before[ok], slide_friction,
-                             self.config.exact_cylinder if exact_cylinder is None
-                             else exact_cylinder, None if rho is None else rho[ok])
+                             None if rho is None else rho[ok])
         if ok.all():
             state.normals, state.anchors = n, a
         else:
@@ -736,7 +666,7 @@ class MotionModel:
 def pad_spins(model: HandModel, roll: np.ndarray, theta: np.ndarray,
               rot: np.ndarray) -> np.ndarray:
     """(P, N) each pad's spin against the object about the contact normal since the rolling
-    frames `roll` (P, N, 21) were taken [rad]: s = n . (omega_O - omega_D), omega_O =
+    frames `roll` (P, N, N_RL) were taken [rad]: s = n . (omega_O - omega_D), omega_O =
     vee(sym(R R0^T)), omega_D = -(sum theta - sum theta_0) x_F (the kernel's `_spin_rate`)."""
     r0 = roll[..., kern.RL_ROT:kern.RL_ROT + 9].reshape(roll.shape[:2] + (3, 3))
     w = np.einsum("pab,pncb->pnac", rot, r0)
@@ -776,38 +706,33 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
         for k in range(1, m.n_joints):
             q_f[:, k, 1] = q_f[:, k - 1, 1] + seg[:, k - 1] * np.sin(phi[:, k - 1])
             q_f[:, k, 2] = q_f[:, k - 1, 2] + seg[:, k - 1] * np.cos(phi[:, k - 1])
-        scale = seg / m.segments if cfg.link_scaling else np.ones_like(seg)
-        coms = m.link_coms.copy()
-        coms[..., 2] *= scale
-        com_f = q_f + np.einsum("nkab,nkb->nka", plane_rotation(phi), coms)
+        com_f = q_f + np.einsum("nkab,nkb->nka", plane_rotation(phi), m.link_coms)
         com_p = m.base_pos[:, None, :] + np.einsum("nab,nkb->nka", m.base_rot, com_f)
-        e -= np.sum(m.link_masses * scale * (com_p @ g))
+        e -= np.sum(m.link_masses * (com_p @ g))
     if "object_gravity" in cfg.terms:
         mass, com = motion.object_arrays(state)
         e -= mass[q] * g @ (pos + rot @ com[q])
-    if "contacts" in cfg.terms and "rolling" in cfg.terms:
+    if "contacts" in cfg.terms and cfg.rolling:
         c = contact_points(m, theta, state.normals[q], state.segments[q])
         d = c - (pos + state.anchors[q] @ rot.T)
         n = roll[:, 3:6]
         tangential = d - np.sum(d * n, axis=-1, keepdims=True) * n
         centre = contact_points(m, theta, np.zeros_like(state.normals[q]), state.segments[q])
         gap = pad_gaps(centre, pos + roll[:, kern.RL_CENTRE:kern.RL_CENTRE + 3] @ rot.T,
-                       roll[:, kern.RL_AXIS:kern.RL_AXIS + 3] @ rot.T,
                        roll[:, kern.RL_RHO] + m.pad_radius)
         kc = cfg.contact_stiffness
         e += 0.5 * kc * np.sum(gap**2)
         spin = np.zeros(len(roll))
-        if cfg.spin_stiffness > 0 or cfg.spin_friction > 0:
+        fr = motion.friction
+        if fr.spin_stiffness > 0 or fr.spin > 0:
             spin = pad_spins(m, roll[None], theta[None], rot[None])[0]
-        e += 0.5 * cfg.spin_stiffness * np.sum(spin**2)
+        e += 0.5 * fr.spin_stiffness * np.sum(spin**2)
         t2 = np.sum(tangential**2, axis=-1)
-        mu, mu_t = cfg.slide_friction, cfg.spin_friction
+        mu, mu_t = fr.slide, fr.spin
         if mu_t > 0:
-            eps = cfg.spin_smoothing
+            eps = fr.spin_smoothing
             tau = mu_t * roll[:, kern.RL_FORCE]
-            s0 = np.array([kern.spin_offset(q0, t0, eps)
-                           for q0, t0 in zip(roll[:, kern.RL_SPIN_TORQUE], tau, strict=True)])
-            e += np.sum(tau * (np.sqrt((spin + s0)**2 + eps**2) - np.sqrt(s0**2 + eps**2)))
+            e += np.sum(tau * (np.sqrt(spin**2 + eps**2) - eps))
         cap = mu * roll[:, kern.RL_FORCE] if math.isfinite(mu) else np.full(len(roll), math.inf)
         z = np.sqrt(t2)
         with np.errstate(invalid="ignore"):

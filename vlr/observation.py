@@ -6,27 +6,16 @@ pose (p, R), which the motion model's equilibrium keeps consistent with forward 
 the VLR: contacts by the finger chains (Eq. 2), POM through the virtual links E^C to the
 contacts (Eq. 1, 3; `pom_forward_kinematics` recomputes it that way for N >= 3).
 
-Noise model: independent Gaussians on the position error [m] and on the rotation angle of
-R_obs^T R_pred [rad]. The scales are perception accuracy (about 0.05 mm and 0.2 degree,
-METHOD.md 8.2) plus model error; the defaults 0.5 mm and 1 degree are deliberately wider,
-because a likelihood narrower than the model-world gap makes the filter confidently wrong
-(trials in the sim with rolling contacts, whose gap is smaller, take 0.35 mm and 0.7 degree,
-`vlr.trial.ROLLING_SIGMA`, or by default 0.2 mm and 0.4 degree with the turn term below,
-`vlr.trial.ROLLING_TURN_SIGMA`).
+Noise model: independent Gaussians on the position error [m] and on the rotation of
+R_pred R_obs^T [rad]. The scales are perception accuracy (about 0.05 mm and 0.2 degree,
+docs/METHOD.md 8.2) plus model error: a likelihood narrower than the model-world gap makes
+the filter confidently wrong. Each backend sets its own (`vlr.backends`; the measured
+figures in docs/DECISIONS.md).
 
-Process noise that grows with the action's size (issue #5, model term (c)): the model-world
-gap is a fraction of the motion an action causes (`vlr gap`'s per-action ratio), so with
-`motion_fraction` kappa > 0 each particle's scales become
-sigma^2 + (kappa * its predicted motion)^2, position and rotation alike, its motion being the
-POM's displacement and rotation angle over the action. Since the scales then differ between
-particles, the likelihood keeps its normalisation, -log sigma_pos - log sigma_rot: without
-it, particles predicting large motions would be favoured for their wide tolerance.
-
-The grasp's turn (issue #5, section 5 of RESULTS.md): `vlr gap` finds 94-99% of the model's
-per-action pose error along one direction of the 6-D pose, the object turning in its grip
-about the axis from the opposed finger's contact (the thumb) to the mean of the others'
-contacts. With `sigma_turn` s > 0 the pose error e = (p_pred - p_obs, rotvec(R_pred R_obs^T))
-is Gaussian with covariance
+The grasp's turn: `vlr gap` finds nearly all of the model's per-action pose error along one
+direction of the 6-D pose, the object turning in its grip about the axis from the opposed
+finger's contact (the thumb) to the mean of the others' contacts. With `sigma_turn` s > 0
+the pose error e = (p_pred - p_obs, rotvec(R_pred R_obs^T)) is Gaussian with covariance
 
     Sigma = D + s^2 v v^T,  D = diag(sigma_pos^2 I_3, sigma_rot^2 I_3),
     v = (a x (p - q), a),
@@ -40,43 +29,18 @@ particle's own contacts, `grasp_turn`). By Sherman-Morrison,
 so the base scales can be narrow (the camera plus what is left off the turn) while a turn of
 the size the model gets wrong costs little.
 
-Tendon tensions (session 17): where the hand reads each tendon's tension T (N,) [N] beside
-the pose (`TensionedObservation`; the sim's static tensions, `vlr.hand.ApplyReport`), with
+Tendon tensions: where the hand reads each tendon's tension T (N,) [N] beside the pose
+(`TensionedObservation`; the sim's static tensions, `vlr.hand.ApplyReport`), with
 `sigma_tension` s_T > 0 the likelihood multiplies by independent Gaussians on each tension,
 -0.5 sum_i ((T_pred,i - T_i) / s_T)^2, T_pred the particle's own k_t max(0, u - s(theta))
 (Eq. 7 compliant, `vlr.motion.MotionModel.tensions`). The tension is the springs' torque
 through the pulleys, so it reads the joint angles directly, where the pose's information lies
-mostly along the object's turn (docs/RESULTS.md 2, "What would converge in 15").
-
-The model error's size (session 25): the scales above are set for the worst of the objects,
-and a trial on an object the model gets right weighs its observations as loosely as one on
-an object it gets wrong. With the "noise" unknown (`vlr.filter.parse_unknown`) each particle
-carries a factor s on every pose scale (`ParticleState.noise`; the tension's scale is a
-sensor's and keeps its own), the covariance becomes s^2 Sigma, and
-
-    log p = -e^T Sigma^-1 e / (2 s^2) - 6 log s + (the terms above),
-
-the normalisation -6 log s charging a wide tolerance for its width (the Occam factor of a
-hierarchical noise scale). The filter then identifies the size of the model's error with
-the rest of the particle: the posterior over s follows the residuals of the particles that
-fit. A bias the other unknowns can absorb leaves small residuals and so is not seen by s;
-that is the risk of a narrower likelihood, and why the trials measure coverage.
-
-Heavy tails (session 38): `vlr gap`'s per-action errors are heavy-tailed (its medians a half to
-a third of its means: a few actions that slip or roll where the model sticks carry most of
-it), and a Gaussian wide enough for those is wider than the typical action needs. With
-`dof` nu > 0 the pose's term is a multivariate Student t with the same scale matrix
-(Sigma, or s^2 Sigma with the noise unknown),
-
-    log p = -(nu + 6) / 2 log(1 + q / nu) + (the normalisations above),  q = e^T Sigma^-1 e,
-
-the marginal of a Gaussian whose precision is Gamma(nu/2, nu/2)-distributed afresh on every
-observation: an action the model gets badly wrong costs a particle log q, not q. nu -> inf
-is the Gaussian; 0 keeps it.
+mostly along the object's turn.
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -86,12 +50,9 @@ from scipy.spatial.transform import Rotation
 from vlr.kinematics import HandModel, pom_from_contacts
 from vlr.motion import ParticleState
 
-# The pose error's dimensions (position and rotation, 3 each): a factor s on every pose scale
-# multiplies the Gaussian's normalisation by s^-6.
-POSE_DIMS = 6
-
-__all__ = ["PoseObservation", "PomObservation", "TensionedObservation", "ObservationModel",
-           "rotation_angle", "rotation_error", "grasp_turn", "pom_forward_kinematics"]
+__all__ = ["PoseObservation", "PomObservation", "TensionedObservation", "ObservationConfig",
+           "ObservationModel", "rotation_angle", "rotation_error", "grasp_turn",
+           "pom_forward_kinematics"]
 
 
 class PoseObservation(Protocol):
@@ -167,47 +128,57 @@ def pom_forward_kinematics(model: HandModel,
 
 
 @dataclass(frozen=True)
-class ObservationModel:
-    """Lambda (Eq. 5) with a Gaussian pose-error likelihood.
+class ObservationConfig:
+    """The likelihood's scales (Eq. 5; module docstring).
 
     Attributes:
-        sigma_pos: position noise scale [m] (perception ~5e-5 plus model error).
-        sigma_rot: rotation-angle noise scale [rad] (perception ~0.0035 plus model error).
-        motion_fraction: kappa, the model error as a fraction of each particle's predicted
-            motion over the action (module docstring); 0 = fixed scales.
-        sigma_turn: s, the model error of the object's turn in its grip [rad] (module
-            docstring); 0 = no turn term.
-        opposed: the finger opposing the others (the thumb's index), which sets the turn's
-            axis.
-        sigma_tension: s_T, the scale of each tendon tension's error [N] (module docstring);
-            0 = tensions not weighed.
-        dof: nu, the pose error's Student-t degrees of freedom (module docstring, "Heavy
-            tails"); 0 = Gaussian.
+        sigma_pos_mm: position noise scale [mm] (perception ~0.05 plus model error).
+        sigma_rot_deg: rotation noise scale [deg] (perception ~0.2 plus model error).
+        sigma_turn_deg: the model error of the object's turn in its grip [deg]; 0 = no turn
+            term. Needs a finger named "thumb", the turn axis's start.
+        sigma_tension_n: the scale of each tendon tension's error [N]; 0 = tensions not
+            weighed (the hand must report them: the sim does, the real hand with a `tension`
+            calibration, hardware/README.md).
     """
 
-    sigma_pos: float = 0.5e-3
-    sigma_rot: float = float(np.radians(1.0))
-    motion_fraction: float = 0.0
-    sigma_turn: float = 0.0
-    opposed: int = 0
-    sigma_tension: float = 0.0
-    dof: float = 0.0
+    sigma_pos_mm: float = 0.5
+    sigma_rot_deg: float = 1.0
+    sigma_turn_deg: float = 0.0
+    sigma_tension_n: float = 0.0
 
     def __post_init__(self) -> None:
-        for name in ("sigma_pos", "sigma_rot"):
-            if not getattr(self, name) > 0:
-                raise ValueError(f"{name} {getattr(self, name)!r} must be > 0")
-        if not self.motion_fraction >= 0:
-            raise ValueError(f"motion_fraction {self.motion_fraction!r} must be >= 0")
-        if not (np.isfinite(self.sigma_turn) and self.sigma_turn >= 0):
-            raise ValueError(f"sigma_turn {self.sigma_turn!r} must be >= 0")
-        if not (np.isfinite(self.sigma_tension) and self.sigma_tension >= 0):
-            raise ValueError(f"sigma_tension {self.sigma_tension!r} must be >= 0")
-        if not (np.isfinite(self.dof) and self.dof >= 0):
-            raise ValueError(f"dof {self.dof!r} must be >= 0 (0: Gaussian)")
-        if self.sigma_turn > 0 and self.motion_fraction > 0:
-            raise ValueError("sigma_turn and motion_fraction are two models of the same "
-                             "error: set one")
+        for name in ("sigma_pos_mm", "sigma_rot_deg"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v > 0):
+                raise ValueError(f"{name} {v!r} must be > 0")
+        for name in ("sigma_turn_deg", "sigma_tension_n"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} {v!r} must be >= 0 (0: off)")
+
+
+class ObservationModel:
+    """Lambda (Eq. 5) with the Gaussian pose likelihood of `config` (module docstring).
+
+    Args:
+        config: the scales.
+        model: the hand; the turn term's axis runs from its finger named "thumb".
+    """
+
+    def __init__(self, config: ObservationConfig | None = None,
+                 model: HandModel | None = None) -> None:
+        self.config = config or ObservationConfig()
+        c = self.config
+        self.sigma_pos = c.sigma_pos_mm * 1e-3
+        self.sigma_rot = float(np.radians(c.sigma_rot_deg))
+        self.sigma_turn = math.radians(c.sigma_turn_deg)
+        self.sigma_tension = float(c.sigma_tension_n)
+        names = tuple(model.names) if model is not None else ("thumb",)
+        # The finger opposing the others, the turn axis's start.
+        self.opposed = names.index("thumb") if "thumb" in names else 0
+        if self.sigma_turn > 0 and "thumb" not in names:
+            raise ValueError(f"sigma_turn_deg {c.sigma_turn_deg:g}: the turn's axis runs from "
+                             f"a finger named 'thumb'; the fingers are {list(names)}")
 
     def predict(self, state: ParticleState) -> tuple[np.ndarray, np.ndarray]:
         """Predicted POM pose of every particle: position (P, 3), rotation (P, 3, 3)."""
@@ -222,51 +193,27 @@ class ObservationModel:
         return e_pos, e_rot
 
     def log_likelihood(self, state: ParticleState, obs: PoseObservation,
-                       motion: tuple[np.ndarray, np.ndarray] | None = None,
                        tensions: np.ndarray | None = None) -> np.ndarray:
         """log p(obs | particle) up to a constant (Eq. 5 with Gaussian noise), (P,);
         -inf for invalid particles, so a failed solve gets zero weight, never NaN.
 
-        `motion`: each particle's predicted POM displacement [m] and rotation angle [rad]
-        over the action, (P,) each; used when `motion_fraction` > 0 (module docstring).
         `tensions`: each particle's predicted tendon tensions [N], (P, N); weighed against
-        the observation's when `sigma_tension` > 0 and it has them (module docstring).
-        `state.noise` (P,), where the state has it: each particle's factor on the pose's
-        scales (module docstring, "The model error's size")."""
-        quad, log_norm = self._pose_terms(state, obs, motion)
-        noise = getattr(state, "noise", None)
-        if noise is None:
-            ll = self._kernel(quad) + log_norm
-        else:
-            s = np.asarray(noise, dtype=float)
-            ll = self._kernel(quad / (s * s)) + log_norm - POSE_DIMS * np.log(s)
+        the observation's when `sigma_tension` > 0 and it has them (module docstring)."""
+        quad, log_norm = self._pose_terms(state, obs)
+        ll = -0.5 * quad + log_norm
         observed = getattr(obs, "tensions", None)
         if self.sigma_tension > 0 and tensions is not None and observed is not None:
             r = (np.asarray(tensions) - np.asarray(observed)[None, :]) / self.sigma_tension
             ll = ll - 0.5 * (r * r).sum(axis=-1)
         return np.where(state.valid & np.isfinite(ll), ll, -np.inf)
 
-    def _kernel(self, quad: np.ndarray) -> np.ndarray:
-        """The pose term's log density in its Mahalanobis square q: -q / 2 (Gaussian) or
-        -(nu + 6) / 2 log(1 + q / nu) (Student t; module docstring, "Heavy tails")."""
-        if self.dof > 0:
-            return -0.5 * (self.dof + POSE_DIMS) * np.log1p(quad / self.dof)
-        return -0.5 * quad
-
-    def _pose_terms(self, state: ParticleState, obs: PoseObservation,
-                    motion: tuple[np.ndarray, np.ndarray] | None
-                    ) -> tuple[np.ndarray, np.ndarray | float]:
+    def _pose_terms(self, state: ParticleState,
+                    obs: PoseObservation) -> tuple[np.ndarray, np.ndarray | float]:
         """The pose's term of `log_likelihood` (Eq. 5) as its quadratic form and its log
-        normalisation (relative to the configured scales): log p = -quad / 2 + log_norm."""
+        normalisation (relative to the base scales): log p = -quad / 2 + log_norm."""
         if self.sigma_turn > 0:
             return self._turn_terms(state, obs)
         e_pos, e_rot = self.errors(state, obs)
-        if self.motion_fraction > 0 and motion is not None:
-            k = self.motion_fraction
-            s_pos = np.sqrt(self.sigma_pos ** 2 + (k * np.asarray(motion[0])) ** 2)
-            s_rot = np.sqrt(self.sigma_rot ** 2 + (k * np.asarray(motion[1])) ** 2)
-            return ((e_pos / s_pos) ** 2 + (e_rot / s_rot) ** 2,
-                    -np.log(s_pos / self.sigma_pos) - np.log(s_rot / self.sigma_rot))
         return (e_pos / self.sigma_pos) ** 2 + (e_rot / self.sigma_rot) ** 2, 0.0
 
     def _turn_terms(self, state: ParticleState,

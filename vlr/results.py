@@ -20,13 +20,15 @@ __all__ = ["summarize", "write_outputs", "COVERAGE_TOLERANCE_DEG"]
 COVERAGE_TOLERANCE_DEG = 0.1
 
 
-def summarize(result, model, args, wall: float, final_truth=None) -> dict:
+def summarize(result, model, settings, wall: float, final_truth=None) -> dict:
     """The result.json content: errors against the truth at the final iteration.
 
-    `args` names the trial (backend, object, hand, particles, seed, unknown)."""
+    `settings` (`vlr.settings.Settings`) name the trial; all of them are written too."""
     n, k = model.n_fingers, model.n_joints
-    out: dict = {"backend": args.backend, "object": args.object, "hand": args.hand,
-                 "particles": args.particles, "seed": args.seed, "unknowns": args.unknown,
+    w = settings.world
+    out: dict = {"backend": w.backend, "object": w.object, "hand": w.hand,
+                 "true_hand": w.true_hand, "particles": settings.filter.particles,
+                 "seed": settings.seed, "unknowns": list(settings.filter.unknowns),
                  "converged": bool(result.converged), "iterations": int(result.iterations),
                  "converged_at": result.converged_at,
                  "grasp_lost_at": result.grasp_lost_at,
@@ -43,7 +45,7 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
                                        for r in result.history]
     # Each unknown's posterior median per iteration (SI units), with or without a truth: the
     # errors below lose their sign, and whether an estimate comes down from above or up from
-    # below is what tells a prior's pull from the model's (RESULTS.md 5, session 33).
+    # below is what tells a prior's pull from the model's.
     specs = list(result.unknowns)
     if specs and result.history:
         tail = len(specs)
@@ -92,9 +94,8 @@ def summarize(result, model, args, wall: float, final_truth=None) -> dict:
         first = result.scores[0]
         if first.theta_prior_covered is not None:
             # Scoring only: the share of true joints inside the grasp prior's 95% interval.
-            # Low, the guess (nominal_theta_deg) or its spread missed the grasp, and the
-            # filter's answer says more of the guess than of the hand (RESULTS.md 5, session
-            # 35: a synthetic run started 50 degrees off).
+            # Low, the guess (filter.guess_theta_deg) or its spread missed the grasp, and the
+            # filter's answer says more of the guess than of the hand.
             out["prior_coverage"] = float(np.mean(first.theta_prior_covered))
         covered = list(s.theta_covered) + list(s.unknown_covered.values())
         out["coverage"] = float(np.mean(covered))
@@ -160,7 +161,7 @@ def write_outputs(out: Path, result, summary: dict, model, truths: list | None =
     if result.scores and unknowns:
         # the truth of each unknown per iteration: the scored estimate minus its error
         base = hist["mean"].shape[1] - len(unknowns)
-        # (NaN for an unknown without a true value: the likelihood's "noise")
+        # (NaN for an unknown without a true value: a mesh object's curvature)
         hist["truth_unknowns"] = np.array(
             [[hist["mean"][i, base + j] - sc.unknown_error.get(spec, np.nan)
               for j, spec in enumerate(unknowns)] for i, sc in enumerate(result.scores)])
@@ -173,7 +174,6 @@ def write_outputs(out: Path, result, summary: dict, model, truths: list | None =
 # Display units of the unknowns by kind: (scale from SI, what it is, unit).
 _UNKNOWN_UNITS = {"stiffness": (1.0, "stiffness", "N m/rad"), "length": (1e3, "length", "mm"),
                   "tendon": (1e-3, "tendon stiffness", "N/mm"),
-                  "noise": (1.0, "factor on the pose scales", ""),
                   "mass": (1e3, "object mass", "g"),
                   "com": (1e3, "centre of mass in O", "mm"),
                   "curvature": (1.0, "surface curvature", "1/m")}
@@ -225,3 +225,9 @@ def _plot(path: Path, hist: dict, model, n: int, k: int, unknowns: list[str] = (
     from vlr.plots import _save
 
     _save(fig, path)  # atomically (vlr.io.atomic_path), and the figure closed
+
+
+def write_result_files(out: Path, run) -> None:
+    """Every file of one identification (`vlr.run.Identification`): result.json,
+    history.npz, convergence.png."""
+    write_outputs(Path(out), run.result, run.summary, run.model, run.truths)

@@ -1,5 +1,5 @@
 """Rolling contacts: the object's local surface at each contact and the contact update
-(METHOD.md 8.2 "Rolling"; issue 5, model term (a) and (b)).
+(docs/METHOD.md 8.2, "Rolling").
 
 A fingertip pad is a sphere of known radius. Within one action the motion model pins each
 pad's material contact point to the object's (Eq. 8 as a penalty): the pad pivots about it.
@@ -70,9 +70,8 @@ class LocalSurface:
     def kernel_radius(self) -> float:
         """The radius of the local sphere the motion model's rolling term uses [m]: the
         sphere's own, a cylinder's (a sphere of its radius: exact around the axis, too
-        curved along it, unless `MotionConfig.exact_cylinder` holds the pads to the axis;
-        `local_centres`), and 10 m for a plane (flat within 0.1% of a pad's travel; an
-        infinite radius has no centre to hold fixed: `FLAT_CURVATURE`)."""
+        curved along it; `local_centres`), and 10 m for a plane (flat within 0.1% of a pad's
+        travel; an infinite radius has no centre to hold fixed: `FLAT_CURVATURE`)."""
         return 1.0 / FLAT_CURVATURE if self.kind == "plane" else self.radius
 
     @property
@@ -129,23 +128,16 @@ def _side_normals(surface: LocalSurface, m: np.ndarray) -> tuple[np.ndarray, np.
 
 
 def local_centres(surface: LocalSurface, anchors: np.ndarray, m: np.ndarray,
-                  exact_cylinder: bool = False,
-                  rho: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  rho: np.ndarray | None = None) -> np.ndarray:
     """What the motion model's rolling term holds each pad to, in O: the local centre of
-    curvature a - rho m (the local sphere's, `LocalSurface.kernel_radius`) and, for a contact
-    on a cylinder's side with `exact_cylinder`, the cylinder's axis through a - rho m_side
-    (else a zero axis: the sphere). (P, N, 3) each; `m` the object's outward normals at the
-    contacts `anchors` (`surface_normals`); `rho` (P, N) each contact's own radius of
-    curvature [m] (an unknown curvature, `contact_radii`), None: the surface's."""
-    axes = np.zeros_like(m)
+    curvature a - rho m (the local sphere's, `LocalSurface.kernel_radius`; a cylinder's side
+    is held to a sphere of its radius: exact across the axis, too curved along it, which
+    measured no worse than holding the pad to the axis, docs/DECISIONS.md). (P, N, 3); `m`
+    the object's outward normals at the contacts `anchors` (`surface_normals`); `rho` (P, N)
+    each contact's own radius of curvature [m] (an unknown curvature, `contact_radii`), None:
+    the surface's."""
     r = surface.kernel_radius if rho is None else np.asarray(rho, dtype=float)[..., None]
-    if not (exact_cylinder and surface.kind == "cylinder"):
-        return anchors - r * m, axes
-    m_side, on_side = _side_normals(surface, m)
-    r_side = surface.radius if rho is None else r
-    centres = np.where(on_side, anchors - r_side * m_side, anchors - r * m)
-    axes[...] = np.where(on_side, np.asarray(surface.axis, dtype=float), 0.0)
-    return centres, axes
+    return anchors - r * m
 
 
 def contact_radii(curvature: np.ndarray) -> np.ndarray:
@@ -155,20 +147,16 @@ def contact_radii(curvature: np.ndarray) -> np.ndarray:
     return 1.0 / np.maximum(np.asarray(curvature, dtype=float), FLAT_CURVATURE)
 
 
-def pad_gaps(centre: np.ndarray, local: np.ndarray, axes: np.ndarray,
-             reach: np.ndarray | float) -> np.ndarray:
+def pad_gaps(centre: np.ndarray, local: np.ndarray, reach: np.ndarray | float) -> np.ndarray:
     """(...) the rolling term's gap: each pad centre's distance from its local centre of
-    curvature `local`, or from its local axis through it (`axes`, unit; zero: none), less
-    the reach rho + r (negative: the pad sinks in). All in one frame."""
-    d = centre - local
-    d = d - np.sum(d * axes, axis=-1, keepdims=True) * axes
-    return np.linalg.norm(d, axis=-1) - reach
+    curvature `local`, less the reach rho + r (negative: the pad sinks in). One frame."""
+    return np.linalg.norm(centre - local, axis=-1) - reach
 
 
 def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
                   normals: np.ndarray, anchors: np.ndarray, pos: np.ndarray, rot: np.ndarray,
                   segments: np.ndarray, normals_before: np.ndarray,
-                  slide_friction: float = math.inf, exact_cylinder: bool = False,
+                  slide_friction: float = math.inf,
                   rho: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Move each contact to where the pad now touches the object's local surface.
 
@@ -181,8 +169,6 @@ def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
             its normal force (both k_c times a stretch) has slid: its stretch is returned
             onto the friction cone (the return mapping of elasto-plastic friction). inf: no
             contact slides.
-        exact_cylinder: the rolling term held a cylinder's pads to its axis, not to a
-            sphere of its radius (`MotionConfig.exact_cylinder`): its gap is read alike.
         rho: (P, N) each contact's own radius of curvature [m] (`contact_radii`: an unknown
             curvature; a plane of the surface's kind becomes a sphere of it), None: the
             surface's. A contact as flat as a plane's (`FLAT_CURVATURE`) keeps its normal.
@@ -200,9 +186,9 @@ def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
     # The residuals as the motion model's rolling term sees them (its local sphere).
     d = contact - anchors
     tangential = d - np.sum(d * normals_before, axis=-1, keepdims=True) * normals_before
-    local, axes = local_centres(surface, anchors, normals_before, exact_cylinder, rho)
+    local = local_centres(surface, anchors, normals_before, rho)
     reach = surface.kernel_radius if rho is None else np.asarray(rho, dtype=float)
-    gap = pad_gaps(centre, local, axes, reach + radius[..., 0])[..., None]
+    gap = pad_gaps(centre, local, reach + radius[..., 0])[..., None]
     if math.isfinite(slide_friction):
         cap = slide_friction * np.maximum(0.0, -gap)
         t = np.linalg.norm(tangential, axis=-1, keepdims=True)

@@ -6,19 +6,24 @@ A sweep is a YAML file (or the equivalent `vlr sweep` flags):
     name: synthetic-identification     # optional, for the table's title
     out: runs/sweep-synthetic          # output folder
     seeds: [0, 1, 2, 3, 4]             # or "0-4"
-    settings: {backend: synthetic, particles: 60000}   # common to every trial
+    settings:                          # common to every trial (`vlr.settings`)
+      world.backend: synthetic
+      filter.particles: 60000
     cases:                             # optional list of named setting overrides
       - {name: known hand}
-      - {name: thumb distal stiffness, unknowns: [stiffness:thumb.distal]}
-    grid: {object: [apple, wine_glass]}   # optional cartesian product over settings
+      - {name: thumb distal stiffness, filter.unknowns: [stiffness:thumb.distal]}
+    grid: {world.object: [apple, wine_glass]}   # optional cartesian product over settings
 
-Trials = cases x grid x seeds. Each finished trial is written atomically to
-`OUT/trials/<id>.json` (its settings and its result, or its error), so an interrupted sweep
-resumes without repeating a finished trial (`--resume`); `OUT/table.csv` (one row per trial)
-and `OUT/summary.csv` + `OUT/summary.md` (mean and sd over seeds per case, and per value of
-every setting that varies within a case, such as a grid key), with
-`OUT/boxplots.png` (errors per case and object, `vlr.plots.boxplots`), are rebuilt from those
-files alone.
+Settings are the keys of the settings tree (`vlr.settings`), dotted as above or nested
+(`settings: {filter: {particles: 60000}}`), the same keys as `vlr identify --set`; a setting
+a file leaves out takes its backend's default. Trials = cases x grid x seeds.
+
+Each finished trial is written atomically to `OUT/trials/<id>.json` (its settings and its
+result, or its error), so an interrupted sweep resumes without repeating a finished trial
+(`--resume`); `OUT/table.csv` (one row per trial) and `OUT/summary.csv` + `OUT/summary.md`
+(mean and sd over seeds per case, and per value of every setting that varies within a case,
+such as a grid key), with `OUT/boxplots.png` (errors per case and object,
+`vlr.plots.boxplots`), are rebuilt from those files alone.
 """
 
 from __future__ import annotations
@@ -40,45 +45,31 @@ import numpy as np
 from vlr.errors import UserError
 from vlr.executors import run_local, run_ray
 from vlr.io import write_json_atomic, write_text_atomic
-from vlr.trial import TrialSettings
+from vlr.settings import Settings, load_settings
 
 __all__ = ["Trial", "SweepSpec", "load_sweep", "parse_seeds", "expand", "run_one",
            "pending", "collect", "write_tables", "COLUMNS", "run_local", "run_ray"]
 
 
-# Defaults that changed after trials were run under them, at their former values, for trial
-# ids only (`Trial.id`): the Liu-West draw was "gaussian" until session 41, and the files
-# measured before pin it. (The joint stops' 100 -> 17 N m/rad of session 28 renamed the
-# trials of the files that pin 100; trials have been run under both ids since, so it stays.)
-ID_FORMER_DEFAULTS: dict[str, Any] = {"jitter_kernel": "gaussian"}
-# ... and those of one backend's setting, compared at the former value on that backend only,
-# so that the other backends' trials keep their ids: the synthetic world's action solve was
-# "loose" until session 42.
-ID_FORMER_BACKEND_DEFAULTS: dict[str, dict[str, Any]] = {
-    "synthetic": {"synthetic_solve": "loose"}}
-
-
 @dataclass(frozen=True)
 class Trial:
-    """One trial of a sweep: its case name, its settings and a stable id."""
+    """One trial of a sweep: its case name and its settings tree."""
 
     case: str
-    settings: TrialSettings
+    settings: Settings
 
     @property
     def id(self) -> str:
-        """Readable and unique: case, object, hand, seed and a hash of all settings."""
+        """Readable and unique: case, object, hand, seed and a hash of every setting in
+        effect, so that a trial run under other settings (a default changed since) is a new
+        trial, never a finished one to skip."""
         s = self.settings
-        # Only settings that differ from the defaults: adding a setting to TrialSettings later
-        # must not rename (and so rerun) the trials of an existing sweep. A default that
-        # changed is compared at its former value, so the files that pin it keep their ids.
-        defaults = {**TrialSettings().to_dict(), **ID_FORMER_DEFAULTS,
-                    **ID_FORMER_BACKEND_DEFAULTS.get(s.backend, {})}
-        changed = {k: v for k, v in s.to_dict().items() if v != defaults.get(k)}
-        blob = json.dumps({"case": self.case, **changed}, sort_keys=True)
+        flat = {k: v for k, v in s.flat().items() if k != "seed"}
+        blob = json.dumps({"case": self.case, **flat}, sort_keys=True, default=str)
         digest = hashlib.sha1(blob.encode()).hexdigest()[:8]
         slug = "".join(ch if ch.isalnum() else "-" for ch in self.case.lower()).strip("-")
-        return f"{slug}_{_file_safe(s.object)}_{_file_safe(s.hand)}_s{s.seed}_{digest}"
+        w = s.world
+        return f"{slug}_{_file_safe(w.object)}_{_file_safe(w.hand)}_s{s.seed}_{digest}"
 
 
 def _file_safe(name: str) -> str:
@@ -185,9 +176,13 @@ def expand(spec: SweepSpec) -> list[Trial]:
         name = str(case.pop("name", "trial"))
         for values in itertools.product(*(spec.grid[k] for k in keys)):
             for seed in spec.seeds:
-                d = {**spec.settings, **case, **dict(zip(keys, values, strict=True)),
-                     "seed": seed}
-                trials.append(Trial(name, TrialSettings.from_dict(d)))
+                try:
+                    settings = load_settings(spec.settings, case,
+                                             dict(zip(keys, values, strict=True)),
+                                             {"seed": seed})
+                except UserError as exc:
+                    raise UserError(f"case {name!r}: {exc}") from None
+                trials.append(Trial(name, settings))
     ids = [t.id for t in trials]
     if len(set(ids)) != len(ids):
         raise UserError("the sweep defines the same trial twice; check cases and grid")
@@ -199,23 +194,24 @@ def _check_names(trials: list[Trial]) -> None:
     """A misspelt object, hand or unknown is one error now, not a failed trial per seed."""
     from vlr.kinematics import HandModel
     from vlr.spec import SpecError, load_hand, load_object
-    from vlr.trial import check_unknowns
+    from vlr.world import check_unknowns
 
     seen: set = set()
     for t in trials:
-        s = t.settings
-        key = (s.object, s.hand, s.true_hand, s.unknowns)
+        s, w = t.settings, t.settings.world
+        key = (w.object, w.hand, w.true_hand, s.filter.unknowns,
+               json.dumps(s.filter.priors, sort_keys=True))
         if key in seen:
             continue
         seen.add(key)
         try:
-            load_object(s.object)
-            model = HandModel.from_spec(load_hand(s.hand))
-            if s.true_hand:
-                load_hand(s.true_hand)
-        except (SpecError, FileNotFoundError) as exc:
+            load_object(w.object)
+            model = HandModel.from_spec(load_hand(w.hand))
+            if w.true_hand:
+                load_hand(w.true_hand)
+            check_unknowns(s, model)
+        except (SpecError, FileNotFoundError, UserError) as exc:
             raise UserError(f"case {t.case!r}: {exc}") from None
-        check_unknowns(s, model)
 
 
 def trial_path(out: Path, trial: Trial) -> Path:
@@ -256,13 +252,15 @@ def run_one(trial: Trial, out: Path, keep_files: bool = False,
     Runs in a worker process (top-level function: picklable) or a Ray task
     (`vlr.executors`). Seeds fix its numbers whichever worker runs it."""
     from vlr.provenance import code_version
-    from vlr.trial import run_trial
+    from vlr.run import run_identification
 
     record: dict[str, Any] = {"id": trial.id, "case": trial.case,
-                              "settings": trial.settings.to_dict(), "code": code_version()}
+                              "settings": trial.settings.flat(), "code": code_version()}
     try:
-        files = out / "trials" / trial.id if keep_files else None
-        result = run_trial(trial.settings, files)
+        run = run_identification(trial.settings)
+        if keep_files:
+            run.write(out / "trials" / trial.id)
+        result = dict(run.summary)
         result.pop("settings", None)
         record.update(status="ok", result=result)
     except Exception as exc:  # noqa: BLE001 - a sweep reports a failed trial and goes on
@@ -279,9 +277,10 @@ PAPER_ITERATIONS = 15   # METHOD.md 6: the paper converged in 15.1 +- 3.6 iterat
 
 # Per-trial columns: (header, path into the record). Paths name keys of result.json.
 COLUMNS: list[tuple[str, tuple[str, ...]]] = [
-    ("case", ("case",)), ("backend", ("settings", "backend")),
-    ("object", ("settings", "object")), ("hand", ("settings", "hand")),
-    ("true_hand", ("settings", "true_hand")), ("particles", ("settings", "particles")),
+    ("case", ("case",)), ("backend", ("settings", "world.backend")),
+    ("object", ("settings", "world.object")), ("hand", ("settings", "world.hand")),
+    ("true_hand", ("settings", "world.true_hand")),
+    ("particles", ("settings", "filter.particles")),
     ("seed", ("settings", "seed")), ("status", ("status",)),
     ("converged", ("result", "converged")), ("iterations", ("result", "converged_at")),
     ("proximal_deg", ("result", "errors", "proximal_deg_mean")),
@@ -392,11 +391,7 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
         for joint, v in (median.get("stiffness") or {}).items():
             row[f"stiffness_median.{joint}"] = v
         _object_unknowns(row, median, "_median")
-    # The likelihood's identified scale factor ("noise" unknown), where sampled.
-    noise = _get(rec, ("result", "unknown_estimates", "noise", "median"))
-    if noise is not None:
-        row["noise_scale"] = noise
-    # The code it ran at (`vlr.provenance`; records from before session 41 have none).
+    # The code it ran at (`vlr.provenance`).
     if (code := rec.get("code")) is not None:
         row["commit"] = code["commit"][:12] + ("+dirty" if code.get("dirty") else "")
     if rec.get("status") != "ok":
@@ -438,20 +433,23 @@ SUMMARY_COLUMNS = [("proximal [deg]", "proximal_deg", 2),
                    ("proximal link error, median [mm]", "proximal_link_mm_median", 2)]
 
 
-# What the summary is always split by; `varying_settings` adds a sweep's grid keys.
+# What the summary is always split by (row columns, and the settings they come from);
+# `varying_settings` adds a sweep's grid keys.
 SUMMARY_KEYS = ("case", "backend", "object", "hand", "true_hand", "particles")
+_SUMMARY_SETTINGS = ("world.backend", "world.object", "world.hand", "world.true_hand",
+                     "filter.particles")
 
 
 def varying_settings(records: list[dict[str, Any]]) -> list[str]:
     """The settings, the seed aside, that differ between the trials of one case: a sweep's
-    grid keys (`grid: {jitter_h: [0.4, 0.2]}`). Each gets a column in the tables and splits
+    grid keys (`grid: {filter.jitter_h: [0.4, 0.2]}`). Each gets a column in the tables and splits
     the summary, so that a grid's values are not averaged together."""
     by_case: dict[Any, list[dict[str, Any]]] = {}
     for r in records:
         by_case.setdefault(r.get("case"), []).append(r.get("settings") or {})
     keys: set[str] = set()
     for settings in by_case.values():
-        for k in set().union(*settings) - {"seed", *SUMMARY_KEYS}:
+        for k in set().union(*settings) - {"seed", *_SUMMARY_SETTINGS}:
             if len({json.dumps(st.get(k), sort_keys=True) for st in settings}) > 1:
                 keys.add(k)
     return sorted(keys)
@@ -488,8 +486,6 @@ def summarize_rows(rows: list[dict[str, Any]],
                     else "g" if col.startswith("object_mass")
                     else "1/m" if col.startswith("curvature") else "mm")
             s[f"{col} error [{unit}]"] = _fmt([r.get(col) for r in ok], digits)
-        if any(r.get("noise_scale") is not None for r in ok):
-            s["noise scale"] = _fmt([r.get("noise_scale") for r in ok], 2)
         out.append(s)
     return out
 
@@ -542,8 +538,8 @@ def write_tables(out: Path, records: list[dict[str, Any]], title: str = "sweep",
         from vlr.plots import boxplots
 
         cases = {r["case"] for r in ok}
-        box_rows = [{**r["result"], "object": (f"{r['case']}\n{r['settings']['object']}"
+        box_rows = [{**r["result"], "object": (f"{r['case']}\n{r['result']['object']}"
                                                if len(cases) > 1
-                                               else r["settings"]["object"])} for r in ok]
+                                               else r["result"]["object"])} for r in ok]
         paths["boxplots"] = boxplots(box_rows, out / "boxplots.png")
     return paths

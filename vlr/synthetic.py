@@ -11,7 +11,7 @@ only.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -20,11 +20,8 @@ from vlr.kinematics import HandModel, normals_from_angles
 from vlr.motion import MotionConfig, MotionModel, ObjectParams, ParticleState, rotvec_to_matrix
 from vlr.observation import PomObservation
 
-__all__ = ["WORLD_SOLVES", "SyntheticConfig", "NominalGrasp", "Truth", "SyntheticWorld",
-           "nominal_grasp", "random_action"]
-
-# How the world solves an action (`SyntheticConfig.solve`).
-WORLD_SOLVES = ("model", "loose")
+__all__ = ["SyntheticConfig", "NominalGrasp", "Truth", "SyntheticWorld", "nominal_grasp",
+           "random_action", "SyntheticOptions", "BACKEND"]
 
 
 @dataclass(frozen=True)
@@ -60,17 +57,6 @@ class SyntheticConfig:
             seed 1's first six), among them draws that then ran to convergence without a
             snap (NH1 seed 1's first draw: 49 actions, docs/RESULTS.md 1).
         max_regrasps: draws before `grasp` gives up with a GraspError.
-        solve: how the world solves an action. "model" (the default since session 42): as
-            the filter solves each particle (`MotionModel.solve` at `motion`, from the
-            previous commands, a large move followed in `motion.follow_substeps` steps), so
-            a particle started at the truth predicts the world's next pose exactly. "loose"
-            (before): one solve of 300 Newton iterations without jump limits, which ends
-            elsewhere than the particle's followed path on a move that needs more than
-            `motion.max_iter` iterations: with rolling contacts, where the path matters, 7
-            of 40 actions 0.12-1.07 mm (up to 1.8 degrees) off (the toy block grasped at
-            (-10, 15) degrees, seed 0; docs/scripts/world_solve_gap.py, docs/RESULTS.md 5,
-            session 42). Either way an action the model's solve cannot make is made the
-            loose way, and a path that jumps is a snap-through.
     """
 
     seed: int = 0
@@ -82,15 +68,12 @@ class SyntheticConfig:
     grasp_tension: float = 5.0
     theta_offset: float = float(np.radians(1.5))
     contact_offset: float = 0.08
-    motion: MotionConfig = MotionConfig()
+    motion: MotionConfig = MotionConfig(rolling=False)
     snap_theta: float = 0.25
     probe_action: float = 0.4e-3
     max_regrasps: int = 10
-    solve: str = "model"
 
     def __post_init__(self) -> None:
-        if self.solve not in WORLD_SOLVES:
-            raise ValueError(f"solve {self.solve!r}: use one of {', '.join(WORLD_SOLVES)}")
         if not self.snap_theta > 0:
             raise ValueError(f"snap_theta {self.snap_theta!r} rad must be > 0")
         if not (np.isfinite(self.probe_action) and self.probe_action >= 0):
@@ -254,11 +237,12 @@ class SyntheticWorld:
     def apply(self, delta: np.ndarray) -> np.ndarray:
         """Change the tendon commands by `delta` (N,) [m] and settle; returns the commands.
 
-        With `config.solve` "model" the action is first solved as a filter particle solves it
-        (`MotionModel.solve` from the previous commands); where that fails, or with "loose",
-        as follows. A joint turning more than `snap_theta` in one solve may still be a
-        continuous move of a compliant grasp: the action is then followed in
-        `motion.follow_substeps` equal steps, the filter's own test
+        The action is first solved as a filter particle solves it (`MotionModel.solve` from
+        the previous commands, a large move followed in `motion.follow_substeps` steps), so a
+        particle started at the truth predicts the world's next pose exactly. Where that
+        fails, it is solved without the jump limits, as follows. A joint turning more than
+        `snap_theta` in one solve may still be a continuous move of a compliant grasp: the
+        action is then followed in `motion.follow_substeps` equal steps, the filter's own test
         (`vlr.motion.MotionConfig.follow_substeps`), and a path whose every step stays under
         `snap_theta` is accepted (its end: the configuration continuity reaches). A path that
         still jumps is a snap-through."""
@@ -271,11 +255,10 @@ class SyntheticWorld:
     def _move(self, delta: np.ndarray) -> ParticleState:
         """The truth after the action `delta` (`apply`), or a GraspError; commits nothing."""
         delta = np.asarray(delta, dtype=float)
-        if self.config.solve == "model":
-            trial = self.state.copy()
-            status, _ = self.motion.solve(trial, self._commands + delta, u_from=self._commands)
-            if status[0] == 0:  # each step held to the model's jump limits: no snap
-                return trial
+        trial = self.state.copy()
+        status, _ = self.motion.solve(trial, self._commands + delta, u_from=self._commands)
+        if status[0] == 0:  # each step held to the model's jump limits: no snap
+            return trial
         trial, turn = self._follow(delta, 1)
         steps = self.config.motion.follow_substeps
         if turn.max() > self.config.snap_theta and steps > 1:
@@ -328,3 +311,85 @@ class SyntheticWorld:
                      object_mass=float(self.motion.obj.mass),
                      object_com=np.asarray(self.motion.obj.com, dtype=float).copy(),
                      surface_curvature=self.motion.obj.surface.curvature)
+
+
+# --------------------------------------------------------------------------- the backend
+
+# An unknown spring whose true rate is not given is drawn from this range of its nominal rate,
+# with the trial's seed (a replaced spring is not the nominal one).
+TRUE_STIFFNESS_RANGE = (0.5, 2.0)
+
+
+@dataclass(frozen=True)
+class SyntheticOptions:
+    """The synthetic world's `world.options`.
+
+    Attributes:
+        true_stiffness: {"finger.joint": k [N m/rad]} the world's true spring rates; an
+            unknown spring not named here is drawn from `TRUE_STIFFNESS_RANGE` times its
+            nominal rate, with the seed.
+    """
+
+    true_stiffness: dict[str, float] = field(default_factory=dict)
+
+
+def _true_stiffness(options: SyntheticOptions, unknowns, model: HandModel,
+                    seed: int) -> dict[tuple[int, int], float]:
+    """{(finger, joint): k} of the world: given values, else seeded draws."""
+    from vlr.errors import UserError
+
+    out: dict[tuple[int, int], float] = {}
+    rng = np.random.default_rng([seed, 7919])
+    for key, value in options.true_stiffness.items():
+        f, _, j = key.partition(".")
+        try:
+            out[(model.finger_index(f), model.joint_index(j))] = float(value)
+        except (KeyError, ValueError) as exc:
+            raise UserError(f"world.options.true_stiffness {key!r}: {exc}") from None
+    for spec in unknowns:
+        kind, _, rest = spec.partition(":")
+        if kind != "stiffness":
+            continue
+        f, _, j = rest.partition(".")
+        key = (model.finger_index(f), model.joint_index(j))
+        if key not in out:
+            out[key] = float(model.stiffness[key] * rng.uniform(*TRUE_STIFFNESS_RANGE))
+    return out
+
+
+def _open_world(settings, options: SyntheticOptions, model, obj, nominal, hand_spec, obj_spec):
+    """The synthetic world of `settings` (`vlr.backends.Backend.open_world`): the filter's
+    own motion model with one particle, the truth, holding the object as its spec has it
+    (whatever the filter believes), built with `world.true_hand` where given."""
+    from vlr.errors import UserError
+    from vlr.spec import load_hand
+    from vlr.world import World
+
+    if settings.filter.observation.sigma_tension_n:
+        raise UserError("filter.observation.sigma_tension_n: the synthetic world does not "
+                        "report tendon tensions: set it to 0")
+    true_model = (HandModel.from_spec(load_hand(settings.world.true_hand))
+                  if settings.world.true_hand else model)
+    world_cfg = SyntheticConfig(seed=settings.seed, motion=settings.filter.motion)
+    world = SyntheticWorld(true_model, ObjectParams.from_spec(obj_spec), world_cfg,
+                           nominal_model=model,
+                           stiffness_overrides=_true_stiffness(
+                               options, settings.filter.unknowns, true_model, settings.seed))
+    return World(world, world.observe, world.truth, model, obj, nominal, hand_spec, obj_spec)
+
+
+def _backend():
+    from vlr.backends import Backend
+
+    # The world IS the filter's model, so only the camera's noise (0.05 mm, 0.2 degree)
+    # counts, with a factor 2 margin; pinned contacts, whose filter is not overconfident
+    # here; the generic grasp guess, at which the world grasps (docs/DECISIONS.md).
+    return Backend(
+        name="synthetic", options=SyntheticOptions, open_world=_open_world,
+        defaults={"filter.motion.rolling": False,
+                  "filter.observation.sigma_pos_mm": 0.1,
+                  "filter.observation.sigma_rot_deg": 0.4,
+                  "filter.contact_prior": "pad"})
+
+
+BACKEND = _backend()

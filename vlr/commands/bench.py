@@ -1,12 +1,12 @@
 """`vlr bench`: time one particle-filter iteration (Algorithm 1) at several particle counts.
 
-Each phase is timed separately: motion (Eq. 9 solve), observation (Eq. 5 likelihood),
-weights (tempering), resampling, jitter; "total" is their sum, "summary" (per-iteration
-quantiles for history) is reported apart. The world is the synthetic one (vlr.synthetic)
-holding the apple, and the filter is built as `vlr identify` builds it (`vlr.trial`), so the
-numbers are those of a real identification run's iterations. `--contacts rolling` (the
-default: what `vlr identify` runs on the sim and the real hand) times the rolling motion
-model, `pinned` the pinned one (the synthetic world's default).
+Each phase is timed separately: motion (Eq. 9 solve), observation (Eq. 5 likelihood), weights
+(tempering), resampling, jitter; "total" is their sum, "summary" (per-iteration quantiles for
+history) is reported apart. The world is the synthetic one (vlr.synthetic) holding the apple,
+and the filter is built from the settings tree as `vlr identify` builds it (`vlr.settings`), so
+the numbers are those of a real identification run's iterations. `--contacts rolling` (the
+default: what `vlr identify` runs on the sim and the real hand) times the rolling motion model,
+`pinned` the pinned one (the synthetic world's default).
 """
 
 from __future__ import annotations
@@ -43,20 +43,21 @@ def bench_one(n_particles: int, repeats: int, seed: int = 0,
     from vlr.filter import ParticleFilter
     from vlr.kinematics import HandModel
     from vlr.motion import ObjectParams
+    from vlr.settings import load_settings
     from vlr.spec import load_hand, load_object
     from vlr.synthetic import SyntheticConfig, SyntheticWorld, random_action
-    from vlr.trial import TrialSettings, identify_config
 
-    settings = TrialSettings(backend="synthetic", object="apple", particles=n_particles,
-                             seed=seed, rolling=contacts == "rolling")
-    model = HandModel.from_spec(load_hand(settings.hand))
-    obj = ObjectParams.from_spec(load_object(settings.object))
+    settings = load_settings({"world.backend": "synthetic", "world.object": "apple",
+                              "filter.particles": n_particles, "seed": seed,
+                              "filter.motion.rolling": contacts == "rolling"})
+    model = HandModel.from_spec(load_hand(settings.world.hand))
+    obj = ObjectParams.from_spec(load_object(settings.world.object))
     # The bench times the filter, not the grasp: a snap-through of the world (a grasp at a
     # fold, `SyntheticConfig.snap_theta`) must not end it.
     world = SyntheticWorld(model, obj, SyntheticConfig(seed=seed, snap_theta=np.pi,
-                                                       motion=settings.motion_config()))
+                                                       motion=settings.filter.motion))
     u = world.grasp()
-    pf = ParticleFilter(model, obj, identify_config(settings, model).filter)
+    pf = ParticleFilter(model, obj, settings.filter, seed)
     pf.initialize(world.observe(), u, world.nominal.theta, world.nominal.contact)
     rng = np.random.default_rng(seed + 1)
     rows = []

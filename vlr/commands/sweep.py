@@ -63,13 +63,14 @@ def _spec(args: argparse.Namespace):
 
     if args.file:
         return load_sweep(args.file, args.out)
-    settings = {"backend": args.backend, "particles": args.particles,
-                "max_iterations": args.max_iterations, "unknowns": list(args.unknown)}
+    settings = {"world.backend": args.backend, "filter.particles": args.particles,
+                "loop.max_iterations": args.max_iterations,
+                "filter.unknowns": list(args.unknown)}
     if args.true_hand:
-        settings["true_hand"] = args.true_hand
+        settings["world.true_hand"] = args.true_hand
     return SweepSpec(name="sweep", out=Path(args.out or "runs/sweep"),
                      seeds=parse_seeds(args.seeds), settings=settings, cases=({},),
-                     grid={"object": list(args.object), "hand": list(args.hand)})
+                     grid={"world.object": list(args.object), "world.hand": list(args.hand)})
 
 
 def run(args: argparse.Namespace) -> int:

@@ -80,6 +80,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "(vlr.controller.ControllerConfig), e.g. secant_updates=True")
     p.add_argument("--option", action="append", default=[], metavar="KEY=VALUE",
                    help="an environment argument, e.g. word=SCI or letter_height=0.002")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="a setting of the identification in reset, as `vlr identify --set` "
+                   "(e.g. filter.observation.sigma_turn_deg=0.5)")
     p.add_argument("--policy", metavar="MODULE:NAME",
                    help="your policy instead of the baseline: NAME(env) returns a callable "
                    "observation -> action (module path, or FILE.py:NAME; docs/TASKS.md)")
@@ -171,6 +174,11 @@ def _checked(args: argparse.Namespace) -> tuple[str, str, dict, dict, dict]:
         raise UserError(f"task {args.name!r} ({env_id}) is not available in this version")
     kwargs = {"backend": args.backend, "particles": args.particles,
               "identify_iterations": args.identify_iterations, **options}
+    if args.set:
+        from vlr.settings import parse_assignment
+
+        kwargs["settings"] = {**kwargs.get("settings", {}),
+                              **dict(parse_assignment(t) for t in args.set)}
     if args.config:
         kwargs["hardware_config"] = args.config
     try:   # checks the arguments; the backend opens in reset
