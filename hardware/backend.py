@@ -1,7 +1,7 @@
 """The real Yale OpenHand Model O behind `vlr.hand.Hand` (`--backend hardware`).
 
 One DYNAMIXEL X-series motor per finger winds that finger's tendon on a spool; an optional
-spread motor is held at a fixed position (the paper keeps the spread fixed, METHOD.md 1).
+spread motor is held at a fixed position (the paper keeps the spread fixed, docs/METHOD.md 1).
 
 Safety, in order of defence:
 

@@ -57,7 +57,7 @@ def resolve_zero(stored: int, present: int, direction: int, spool_radius: float,
     """The stored zero shifted by whole turns to match the motor's present turn count.
 
     An X-series motor forgets whole turns at power-up (present position reads within one
-    turn), so a zero stored in an earlier session is only known modulo 4096 ticks. Choose the
+    turn), so a zero stored before a power cycle is only known modulo 4096 ticks. Choose the
     shift that puts the present tendon command closest to the allowed range.
     """
     per_metre = TICKS_PER_REV / (2.0 * math.pi * spool_radius)

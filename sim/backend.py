@@ -45,12 +45,11 @@ class SimOptions:
         width, height, fovy_deg: palm camera image size [px] and vertical field of view [deg].
         effects: camera degradations (sim.camera_effects.CameraEffects) or None for ideal.
         grasp_tension: target tendon tension at grasp [N] for (thumb, others): the thumb
-            needs about twice the force of each opposing finger (METHOD.md 8.2).
+            needs about twice the force of each opposing finger (docs/METHOD.md 8.2).
         close_speed: tendon pull rate while closing [m/s].
         ramp_time: duration over which an apply() ramps the command [s]. `vlr identify`'s
             sim trials take 0.1 s, the hardware backend's default move
-            (`vlr.trial.RAMP_TIME_DEFAULT`); 50 ms here keeps the tasks' and `vlr gap`'s
-            committed figures.
+            (`SimWorldOptions`); 50 ms here is the tasks' move.
         settle_time_max: bound on the quasi-static wait after a ramp [s].
         settle_qvel: joint speed below which the hand counts as settled [rad/s].
         settle_objvel: object speed below which it counts as settled [m/s].

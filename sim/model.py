@@ -24,7 +24,7 @@ from models.make_tags import TEXTURE_PER_BLACK, tag_path, write_tag
 from sim.pads import ROLL_FRICTION, SLIDE_FRICTION, TORSION_FRICTION
 from vlr.spec import FingerSpec, HandSpec, ObjectSpec, SpecError
 
-# Contact model for stable fingertip grasps (METHOD.md 8.2, models/README.md "Contacts").
+# Contact model for stable fingertip grasps (docs/METHOD.md 8.2, models/README.md "Contacts").
 TIMESTEP = 0.001            # s; solref is clamped to 2 steps, so 4 ms needs <= 2 ms
 SOLREF = (0.004, 1.0)       # stiff contacts, critically damped
 IMPRATIO = 10.0             # elliptic cones, frictional stiffness ~ normal

@@ -26,7 +26,7 @@ class FingerTruth:
         contact_distal: the same point in the distal frame D [m].
         contact_force: total normal force [N].
         contact_region: "pad", "distal_link", "proximal_link" or "none".
-        virtual_distal_length: distal joint axis to contact [m] (METHOD.md 2).
+        virtual_distal_length: distal joint axis to contact [m] (docs/METHOD.md 2).
         virtual_distal_angle: angle of the virtual distal link in the finger plane, measured
             like the joint angles (0 = straight up, positive = flexed) [rad].
         tendon_length: MuJoCo tendon length [m]; tension [N]; command [m].

@@ -1,4 +1,4 @@
-"""Gymnasium environments of precise in-hand manipulation (METHOD.md 5-6), registered on
+"""Gymnasium environments of precise in-hand manipulation (docs/METHOD.md 5-6), registered on
 import under the `vlr/` namespace:
 
     import gymnasium, tasks

@@ -1,4 +1,4 @@
-"""Cup stacking (METHOD.md 6): the hand on an arm picks four cups in decreasing size, each
+"""Cup stacking (docs/METHOD.md 6): the hand on an arm picks four cups in decreasing size, each
 grasped at an unknown tilt, corrects each in the hand (weighted SE(3), Eq. 12, alpha 0.7 mm
 per degree) and stacks them into the target cup.
 
@@ -96,12 +96,11 @@ class CupStackingEnv(HandTaskEnv):
         command_band: as `HandTaskEnv`'s. Pulling is what tilts a cup held by its wall:
             0.4 mm of one side tendon turns it about 1.6 degrees, and the table tilts are
             5-10 degrees, so the band pulls up to 1.2 mm. Releasing a side tendon by 0.6 mm
-            while the other pulls 0.8 mm lost its fingertip (docs/scripts/
-            cups_tendon_probe.py), so the sides release 0.25 mm at most; the thumb holds 22 N
-            against the sides' 12 N and releases 0.7 mm (thumb, left, right): at the band's
-            corner seed 0's cup2 held with 0.8 mm and was lost at 1.0 (`cups_tendon_probe.py
-            --thumb`), and the thumb's release is what levels a cup about x (0.5 mm, the
-            default until session 13: 5.24 degrees at release against 3.91; docs/TASKS.md).
+            while the other pulls 0.8 mm lost its fingertip, so the sides release 0.25 mm at
+            most; the thumb holds 22 N against the sides' 12 N and releases 0.7 mm (thumb,
+            left, right): at the band's corner seed 0's cup2 held with 0.8 mm and was lost at
+            1.0, and the thumb's release is what levels a cup about x (at 0.5 mm: 5.24
+            degrees at release against 3.91; docs/TASKS.md).
         squeeze: as `HandTaskEnv`'s: 0.3 mm on every tendon before the correction, so
             that one finger's pull does not unload the opposite fingertip (without it, the
             1.2 mm band lost a fingertip on seeds 0 and 1).
@@ -109,19 +108,16 @@ class CupStackingEnv(HandTaskEnv):
             default: where the identified grasp predicts levelling takes it,
             `_planned_shift`), "tag" (the POM stays where the camera saw it) or "grip"
             (the identified VLR's contact centroid, over fingers and particles, 45 mm
-            above the tag). "tag" and "grip" were measured worse (docs/TASKS.md, "The
-            in-hand target").
+            above the tag). "tag" and "grip" were measured worse (docs/TASKS.md).
     """
 
     object_name = "cup2"
     # Per-move secant updates on: the identified VLR's Jacobian changes as the filter keeps
-    # identifying, and a correction fitted once lets those changes steer (docs/TASKS.md,
-    # "The grasp guess of the tasks' identification").
+    # identifying, and a correction fitted once lets those changes steer (docs/TASKS.md).
     # alpha 0.7 mm per degree, not the paper's 9.5: the paper gives Eq. 12 no units, and
     # with the target where levelling leads (`_planned_shift`) alpha trades the position at
     # release against the rotation; 0.7 was chosen from alphas 166 to 0.166 measured on
-    # seeds 0-1 and holds on seeds 0-4 and held-out 5-9 (docs/TASKS.md, "Eq. 12's weight on
-    # the cups (session 14)").
+    # seeds 0-1 and holds on seeds 0-4 and held-out 5-9 (docs/TASKS.md).
     controller_config = ControllerConfig(rows="full", alpha=0.7, method="dls", secant=True,
                                          secant_updates=True, tolerance_pos=0.3e-3,
                                          tolerance_rot=float(np.radians(0.3)))
@@ -272,7 +268,7 @@ class CupStackingEnv(HandTaskEnv):
 
         One move's bounds, not the band's whole reach: the band's reach plans shifts twice
         as long in directions 2-3 mm off what the correction then does, and was measured
-        worse (docs/TASKS.md, "The cups in session 13")."""
+        worse (docs/TASKS.md)."""
         from tasks.baseline import fitted_jacobian
 
         jac = fitted_jacobian(self, self.controller_config)

@@ -1,4 +1,4 @@
-"""Handwriting (METHOD.md 6): the POM under the apple traces the waypoints of a word.
+"""Handwriting (docs/METHOD.md 6): the POM under the apple traces the waypoints of a word.
 
 Each letter is traced in place, centred on the POM's pose after identification (the home
 pose, from the camera), in the palm's x-y plane at the home height: position-only control

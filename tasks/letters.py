@@ -3,7 +3,7 @@
 Each letter is one polyline in a unit box (x right, y up; height 1, width 0.7) that the POM
 traces without lifting; a stroke may run back over itself (E's middle bar). Waypoints are
 the polyline's corners plus points inserted so that no two consecutive waypoints are further
-apart than a given spacing (METHOD.md 6: "waypoints of S, C, I, E, N, C, E").
+apart than a given spacing (docs/METHOD.md 6: "waypoints of S, C, I, E, N, C, E").
 """
 
 from __future__ import annotations

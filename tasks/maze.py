@@ -1,4 +1,4 @@
-"""Marble maze (METHOD.md 6): tilt a held maze plate so that a marble rolls to the goal.
+"""Marble maze (docs/METHOD.md 6): tilt a held maze plate so that a marble rolls to the goal.
 
 The hand holds the maze holder (models/objects/maze_holder.yaml: a handle, a post and an
 80 mm plate with walls). The marble is placed at the start after identification, as in the

@@ -243,7 +243,7 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                 e += 0.5 * stiff[i, k] * d * d
                 gA[i, k] += stiff[i, k] * d
                 A[i, k, k] += stiff[i, k]
-        # Joint limits as stiff one-sided penalties (METHOD.md 8.2).
+        # Joint limits as stiff one-sided penalties (docs/METHOD.md 8.2).
         if flags[LIMITS] != 0:
             for k in range(k_n):
                 d = 0.0
@@ -292,7 +292,7 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                         A[i, j, m] += h
                         if m != j:
                             A[i, m, j] += h
-        # Rolling (METHOD.md 8.2): the pad sphere touches the object's local sphere (centre
+        # Rolling (docs/METHOD.md 8.2): the pad sphere touches the object's local sphere (centre
         # rl[i, :3] in O, radius rl[i, RL_RHO]; one equation) and the previous contact points
         # do not slip tangentially to the normal rl[i, 3:] (two), as stiff penalties.
         if flags[CONTACTS] != 0 and flags[ROLLING] != 0:
@@ -306,7 +306,7 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
             nv = (nx, ny, nz)
             tv = (t0, t1, t2)
             G = vk[3:6]
-            # Friction (METHOD.md 8.2; `MotionConfig.slide_friction`, `spin_friction`). The
+            # Friction (docs/METHOD.md 8.2; `MotionConfig.slide_friction`, `spin_friction`). The
             # normal force N is the contact's at the start of the solve, updated while the
             # grasp wedges (`_update_normal_forces`). The slide is a Huber function of the
             # tangential stretch t: the stick spring while k_c |t| <= mu N, the slip's

@@ -10,7 +10,7 @@ proportional controller: act, re-observe the POM with the camera, let the partic
 update the VLR (contacts roll), repeat until the error is below a set precision or the step
 budget is spent (`reach`).
 
-Sub-dimensions (METHOD.md 5): rows are truncated to position (handwriting) or orientation
+Sub-dimensions (docs/METHOD.md 5): rows are truncated to position (handwriting) or orientation
 (maze), or all six are kept with the weighted error of Eq. 12,
 Delta phi' = [Delta x, Delta y, Delta z, alpha Delta roll, alpha Delta pitch, alpha Delta yaw].
 Ours: "full_no_yaw" and "tilt" drop the yaw row (about the palm normal) for an object that is
@@ -54,7 +54,7 @@ __all__ = [
     "reach",
 ]
 
-# Row sets of Delta phi = [x, y, z, rx, ry, rz] (METHOD.md 5: sub-dimensions).
+# Row sets of Delta phi = [x, y, z, rx, ry, rz] (docs/METHOD.md 5: sub-dimensions).
 ROWS: dict[str, tuple[int, ...]] = {
     "position": (0, 1, 2),
     "orientation": (3, 4, 5),
@@ -264,7 +264,7 @@ def transpose_step(jac: np.ndarray, error: np.ndarray, gain: float = 1.0) -> np.
 def dls_step(jac: np.ndarray, error: np.ndarray, damping: float,
              gain: float = 1.0) -> np.ndarray:
     """Damped least squares: Delta l = k (J^T J + lambda^2 I)^-1 J^T Delta phi (the
-    alternative to Eq. 11 that METHOD.md 5 names)."""
+    alternative to Eq. 11 that docs/METHOD.md 5 names)."""
     n = jac.shape[1]
     return gain * np.linalg.solve(jac.T @ jac + damping**2 * np.eye(n), jac.T @ error)
 
@@ -472,7 +472,7 @@ def reach(world: Any, observer: Callable[[], PoseObservation | None], pf: Any,
           controller: JacobianController | None = None,
           observation: PoseObservation | None = None,
           limit: Callable[[np.ndarray, np.ndarray], np.ndarray] | None = None) -> ReachResult:
-    """Drive the POM to a target like a proportional controller (METHOD.md 5).
+    """Drive the POM to a target like a proportional controller (docs/METHOD.md 5).
 
     Each iteration: error from the latest camera pose; stop if within precision; Jacobian
     on the filter's VLR (Eq. 10); step (Eq. 11-12); apply it; observe; let the filter update

@@ -1,4 +1,4 @@
-"""Random exploratory tendon actions (METHOD.md 3, 8.1), sized by the tension they cause.
+"""Random exploratory tendon actions (docs/METHOD.md 3, 8.1), sized by the tension they cause.
 
 At a series stiffness of 20 N/mm a 0.2-0.4 mm change moves a tendon's tension by 4-8 N, the
 size that a study found informative without dropping the object; 1-2 mm actions dropped it.

@@ -50,7 +50,7 @@ class Frame:
 
 @runtime_checkable
 class Hand(Protocol):
-    """A tendon-driven hand with an in-palm camera (METHOD.md 1)."""
+    """A tendon-driven hand with an in-palm camera (docs/METHOD.md 1)."""
 
     @property
     def spec(self) -> HandSpec:

@@ -21,7 +21,7 @@ H^T R_s^-1 H = H^T R^-1 H - s^2 w w^T / (1 + s^2 v^T R^-1 v), w = H^T R^-1 v. Th
 squared error of any estimate of the joint angles at t, over the observation noise, is at
 least G_t J_t^-1 G_t^T, G_t = d theta_t / dx (van Trees' inequality, linearised at x), so a
 posterior whose 95% intervals hold the truth as often as they claim is not narrower on
-average than 3.92 of those standard deviations: the paper's convergence measure (METHOD.md
+average than 3.92 of those standard deviations: the paper's convergence measure (docs/METHOD.md
 3) has a floor that depends only on the model, the actions and the scales, not on the
 particle count.
 

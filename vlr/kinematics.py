@@ -41,7 +41,7 @@ __all__ = [
 
 @dataclass(frozen=True)
 class Chain:
-    """A finger as a serial chain of K hinges about -x_F (METHOD.md 1; Eq. 2).
+    """A finger as a serial chain of K hinges about -x_F (docs/METHOD.md 1; Eq. 2).
 
     Attributes (units in brackets), one entry per joint k = 0..K-1 unless noted:
         lengths: K-1 link lengths, joint k to joint k+1 [m].
@@ -105,7 +105,7 @@ class HandModel:
         chains: one `Chain` per finger.
         base_pos: (N, 3) finger frame origins in the palm frame [m].
         base_rot: (N, 3, 3) R_PF, columns x_F, y_F, z_F in the palm frame.
-        tendon_stiffness: series stiffness of drive plus line [N/m] (METHOD.md 8.2).
+        tendon_stiffness: series stiffness of drive plus line [N/m] (docs/METHOD.md 8.2).
     """
 
     names: tuple[str, ...]

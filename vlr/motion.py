@@ -1,6 +1,6 @@
 """Motion model Gamma (Eq. 4) by energy minimisation (Eq. 6-9), batched over particles.
 
-Formulation (METHOD.md 8.1-8.2; the choice is ours):
+Formulation (docs/METHOD.md 8.1-8.2; the choice is ours):
 
 * State of one particle: physical joint angles theta (N, K); each finger's contact point fixed
   in its distal frame D, on the pad sphere (pad_center + pad_radius * n); the contact points'
@@ -9,12 +9,12 @@ Formulation (METHOD.md 8.1-8.2; the choice is ours):
 * Unknowns of the solve: theta and the object pose (6 dof). Eq. 8 (rigid grasp, fixed
   contacts) is a stiff penalty 1/2 k_c |FK contact_i(theta) - (p + R a_i)|^2 rather than a
   hard constraint: the side fingers move only in their planes, so hard contact equalities are
-  rank-deficient (METHOD.md 8.2), while a penalty with damped Newton is not troubled by it.
+  rank-deficient (docs/METHOD.md 8.2), while a penalty with damped Newton is not troubled by it.
 * Energy (Eq. 9's objective, compliant form): springs 1/2 k (theta - rest)^2 (Eq. 6); series
   tendon 1/2 k_t max(0, u - s(theta))^2 with s = sum r_k (theta_k - lo_k) (Eq. 7 with
   compliance); joint limits as stiff one-sided penalties; gravity potential of the object and
   of the finger links under a configurable gravity vector in the palm frame.
-* Rolling (term "rolling", METHOD.md 8.2; `vlr.surface`): instead of pinning the contact,
+* Rolling (term "rolling", docs/METHOD.md 8.2; `vlr.surface`): instead of pinning the contact,
   each pad sphere touches the object's local surface (a sphere of the object's curvature
   about a centre fixed in O: one equation) and the previous contact points do not slip
   tangentially (two), as stiff penalties. The pin is rolling only to first order; its energy
@@ -365,7 +365,7 @@ class ParticleState:
     def anchor_to_pose(self, model: HandModel, residuals: np.ndarray | None = None) -> None:
         """Re-derive the anchors so that the current POM pose (pos, rot) matches the current
         contacts: a_i = R^T (p_i + r_i - p). Used at initialisation and after jitter, so that a
-        jittered particle predicts the POM it had before (METHOD.md 8.2: a fixed anchor
+        jittered particle predicts the POM it had before (docs/METHOD.md 8.2: a fixed anchor
         biased the estimates by 3-5 degrees).
 
         `residuals` r (P, N, 3) [m] (`contact_residuals`, palm frame) keep each contact

@@ -6,7 +6,7 @@ plots of errors over many trials (for sweeps).
   hundred kB for a 40-iteration run; no cost worth measuring against a filter update).
 * `particle_cloud` draws, per finger, the sample projected on (proximal, distal) joint angle,
   one colour per chosen iteration, with the truth where known: the cloud shrinking onto the
-  truth is the filter converging (METHOD.md 3).
+  truth is the filter converging (docs/METHOD.md 3).
 * `boxplots(rows, path)` draws the errors of many `result.json`s grouped by object and hand.
 
 Pictures are written atomically (`vlr.io.atomic_path`).

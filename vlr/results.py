@@ -1,6 +1,6 @@
 """What one identification trial writes: the `result.json` summary (errors against the
 truth at the final iteration, coverage, timing), `history.npz` and `convergence.png`. Shared
-by `vlr identify`, `vlr sweep` and the tasks through `vlr.trial`."""
+by `vlr identify`, `vlr sweep` and the tasks through `vlr.run`."""
 
 from __future__ import annotations
 

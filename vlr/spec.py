@@ -13,7 +13,7 @@ Frames and sign conventions (one place, used by `models/`, `sim/` and `vlr/` ali
 * Distal frame D: at the distal joint, rotated by (theta_p + theta_d) about -x_F. The pad is a
   sphere of radius `pad_radius` whose centre is `pad_center` (x, y, z) in D; a contact point
   is pad_center + pad_radius * n for a unit normal n in D.
-* Tendon (Eq. 7 with series compliance, METHOD.md 8.2): the tendon length taken up by
+* Tendon (Eq. 7 with series compliance, docs/METHOD.md 8.2): the tendon length taken up by
   flexion from the open stops is s = r_p (theta_p - lo_p) + r_d (theta_d - lo_d). The
   command u >= 0 is the spool's pull from the calibrated open-hand zero. The line is taut
   when u > s, with tension k_t (u - s); it cannot push.
@@ -57,7 +57,7 @@ class SpecError(ValueError):
 
 @dataclass(frozen=True)
 class FingerSpec:
-    """One finger module (METHOD.md 1): two spring-loaded hinges and one tendon.
+    """One finger module (docs/METHOD.md 1): two spring-loaded hinges and one tendon.
 
     Attributes (units in brackets):
         name: finger type, e.g. "modelo", "nf1".
@@ -140,7 +140,7 @@ class HandSpec:
     """A hand: its fingers on palm slots and the tendon-drive compliance.
 
     `tendon_stiffness` is the series stiffness of servo plus tendon line [N/m]
-    (METHOD.md 8.2; models/README.md documents the default).
+    (docs/METHOD.md 8.2; models/README.md documents the default).
     """
 
     name: str

@@ -10,7 +10,7 @@ A sweep is a YAML file (or the equivalent `vlr sweep` flags):
       world.backend: synthetic
       filter.particles: 60000
     cases:                             # optional list of named setting overrides
-      - {name: known hand}
+      - {name: known hand}             # (a case's `group` pools it with others in the summary)
       - {name: thumb distal stiffness, filter.unknowns: [stiffness:thumb.distal]}
     grid: {world.object: [apple, wine_glass]}   # optional cartesian product over settings
 
@@ -53,10 +53,12 @@ __all__ = ["Trial", "SweepSpec", "load_sweep", "parse_seeds", "expand", "run_one
 
 @dataclass(frozen=True)
 class Trial:
-    """One trial of a sweep: its case name and its settings tree."""
+    """One trial of a sweep: its case name, its settings tree, and the group its case is
+    pooled into in the summary (None: none)."""
 
     case: str
     settings: Settings
+    group: str | None = None
 
     @property
     def id(self) -> str:
@@ -174,6 +176,7 @@ def expand(spec: SweepSpec) -> list[Trial]:
     for case in spec.cases:
         case = dict(case)
         name = str(case.pop("name", "trial"))
+        group = case.pop("group", None)
         for values in itertools.product(*(spec.grid[k] for k in keys)):
             for seed in spec.seeds:
                 try:
@@ -182,7 +185,7 @@ def expand(spec: SweepSpec) -> list[Trial]:
                                              {"seed": seed})
                 except UserError as exc:
                     raise UserError(f"case {name!r}: {exc}") from None
-                trials.append(Trial(name, settings))
+                trials.append(Trial(name, settings, None if group is None else str(group)))
     ids = [t.id for t in trials]
     if len(set(ids)) != len(ids):
         raise UserError("the sweep defines the same trial twice; check cases and grid")
@@ -254,7 +257,7 @@ def run_one(trial: Trial, out: Path, keep_files: bool = False,
     from vlr.provenance import code_version
     from vlr.run import run_identification
 
-    record: dict[str, Any] = {"id": trial.id, "case": trial.case,
+    record: dict[str, Any] = {"id": trial.id, "case": trial.case, "group": trial.group,
                               "settings": trial.settings.flat(), "code": code_version()}
     try:
         run = run_identification(trial.settings)
@@ -273,11 +276,11 @@ def run_one(trial: Trial, out: Path, keep_files: bool = False,
 
 # --------------------------------------------------------------------------- tables
 
-PAPER_ITERATIONS = 15   # METHOD.md 6: the paper converged in 15.1 +- 3.6 iterations
+PAPER_ITERATIONS = 15   # docs/METHOD.md 6: the paper converged in 15.1 +- 3.6 iterations
 
 # Per-trial columns: (header, path into the record). Paths name keys of result.json.
 COLUMNS: list[tuple[str, tuple[str, ...]]] = [
-    ("case", ("case",)), ("backend", ("settings", "world.backend")),
+    ("case", ("case",)), ("group", ("group",)), ("backend", ("settings", "world.backend")),
     ("object", ("settings", "world.object")), ("hand", ("settings", "world.hand")),
     ("true_hand", ("settings", "world.true_hand")),
     ("particles", ("settings", "filter.particles")),
@@ -347,7 +350,7 @@ def _unknown_estimates(row: dict[str, Any], estimates: dict[str, Any]) -> None:
 
 def _proximal_links_mm(errors: dict[str, Any]) -> float | None:
     """The mean error over the proximal links alone. The paper's novel-finger unknown is the
-    proximal link (METHOD.md 3, 6); the pad's offset along the distal link is ours (our novel
+    proximal link (docs/METHOD.md 3, 6); the pad's offset along the distal link is ours (our novel
     fingers change it too), so the paper's figure is compared with this, shown beside the
     mean over both."""
     by_joint = errors.get("link_length_mm_by_joint") or {}
@@ -366,7 +369,7 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
                                        errors.get("distal_deg_mean")):
         joints = (errors["proximal_deg_mean"] + errors["distal_deg_mean"]) / 2
     row["joints_deg"] = joints
-    # The convergence measure itself (METHOD.md 3), at the end and after the paper's budget,
+    # The convergence measure itself (docs/METHOD.md 3), at the end and after the paper's budget,
     # for comparison with its floor (`vlr crb`).
     ci = _get(rec, ("result", "ci_deg_by_iteration")) or []
     row["ci_deg"] = ci[-1] if ci else None
@@ -523,6 +526,9 @@ def write_tables(out: Path, records: list[dict[str, Any]], title: str = "sweep",
     grid = varying_settings(records)
     rows = [{**_row(r), **{k: _setting(r, k) for k in grid}} for r in records]
     summary = summarize_rows(rows, grid)
+    # Each group (cases pooled, e.g. the known hand over four objects) as one more row.
+    grouped = [{**r, "case": r["group"], "object": "all"} for r in rows if r.get("group")]
+    summary += summarize_rows(grouped, grid)
     paths = {"table": out / "table.csv", "summary_csv": out / "summary.csv",
              "summary_md": out / "summary.md"}
     write_text_atomic(paths["table"], _csv_text(rows))

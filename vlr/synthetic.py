@@ -1,10 +1,10 @@
-"""A model-consistent synthetic world for identification (METHOD.md 8.1: "on data that
+"""A model-consistent synthetic world for identification (docs/METHOD.md 8.1: "on data that
 follows the model" the filter must converge).
 
 The world IS the motion model (Eq. 6-9) with one particle, the truth, whose parameters may
 differ from the nominal hand (a replaced spring, a replacement finger). It moves tendons like a
 `Hand` (`grasp`, `apply`, `commands`) and returns observations directly: its POM pose plus
-Gaussian noise (0.05 mm, 0.2 degree, the camera's accuracy in METHOD.md 8.2), since the sim
+Gaussian noise (0.05 mm, 0.2 degree, the camera's accuracy in docs/METHOD.md 8.2), since the sim
 camera is not part of this world. Ground truth is available through `truth()` for scoring
 only.
 """
@@ -47,7 +47,7 @@ class SyntheticConfig:
             so even with the action split into 64 steps). A larger turn in one solve is
             followed in `motion.follow_substeps` steps before it is called a snap
             (`SyntheticWorld.apply`).
-            The world reports a snap as a lost grasp, as a real hand's would be (METHOD.md 7:
+            The world reports a snap as a lost grasp, as a real hand's would be (docs/METHOD.md 7:
             the contacts must stay stable).
         probe_action: a drawn truth is probed with each tendon alone pulled and released by
             this much (2 N actions) [m]; one that snaps is a grasp at a fold, and the world
@@ -55,7 +55,7 @@ class SyntheticConfig:
             0 turns the probe off. The default is the largest exploratory action. Probing
             every sign combination instead (2^N actions) flagged most NH1 draws (all of
             seed 1's first six), among them draws that then ran to convergence without a
-            snap (NH1 seed 1's first draw: 49 actions, docs/RESULTS.md 1).
+            snap (NH1 seed 1's first draw: 49 actions).
         max_regrasps: draws before `grasp` gives up with a GraspError.
     """
 
@@ -141,7 +141,7 @@ def nominal_grasp(model: HandModel, obj: ObjectParams, config: SyntheticConfig) 
 
 def random_action(rng: np.random.Generator, n_fingers: int,
                   magnitude: tuple[float, float] = (0.2e-3, 0.4e-3)) -> np.ndarray:
-    """Exploratory action (METHOD.md 3, 8.1): per finger a tendon change of random sign and a
+    """Exploratory action (docs/METHOD.md 3, 8.1): per finger a tendon change of random sign and a
     magnitude uniform in `magnitude` [m] (0.2-0.4 mm: 4-8 N at 20 N/mm)."""
     mag = rng.uniform(magnitude[0], magnitude[1], n_fingers)
     return mag * rng.choice([-1.0, 1.0], n_fingers)
@@ -292,7 +292,7 @@ class SyntheticWorld:
         return trial, turn
 
     def observe(self) -> PomObservation:
-        """The POM pose plus Gaussian noise (METHOD.md 8.2 camera accuracy)."""
+        """The POM pose plus Gaussian noise (docs/METHOD.md 8.2 camera accuracy)."""
         cfg = self.config
         pos = self.state.pos[0] + self.rng.normal(0.0, cfg.noise_pos, 3)
         rot = self.state.rot[0] @ rotvec_to_matrix(self.rng.normal(0.0, cfg.noise_rot, 3))

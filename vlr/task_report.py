@@ -1,5 +1,5 @@
-"""Summaries of `vlr task` runs over seeds: the headline figure of each task (issue #6's
-targets), mean and SD over the runs, the per-run values and the successes, as the Markdown
+"""Summaries of `vlr task` runs over seeds: the headline figure of each task (the paper's
+measures), mean and SD over the runs, the per-run values and the successes, as the Markdown
 rows of docs/TASKS.md and a CSV with one row per run.
 
 Reads only `result.json` dictionaries, so it lives in `vlr` (the CLI writes the summary of
@@ -27,7 +27,7 @@ HEADLINES: dict[str, list[tuple[str, str, str]]] = {
              ("rotation_deg_mean", "rotation error at release", "deg")],
 }
 
-# The paper's hardware figures (METHOD.md 6), beside ours in the summary.
+# The paper's hardware figures (docs/METHOD.md 6), beside ours in the summary.
 PAPER: dict[tuple[str, str], str] = {
     ("handwriting", "position_mm_mean"): "0.42 ± 0.34",
     ("maze", "orientation_deg_mean"): "1.20 ± 1.38",

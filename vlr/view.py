@@ -87,7 +87,7 @@ def hypotheses(model: HandModel, theta: np.ndarray, normals: np.ndarray,
     # E^J: q^k -> q^{k+1} along the chain, then the distal virtual link q^K -> p_i.
     ends = np.concatenate([q[..., 1:, :], c[..., None, :]], axis=-2)
     joint_links = np.stack([q, ends], axis=-2).reshape(-1, 2, 3)
-    # E^C: every pair of {p_1..p_N, p_obj} (METHOD.md 2).
+    # E^C: every pair of {p_1..p_N, p_obj} (docs/METHOD.md 2).
     pts = np.concatenate([c, np.asarray(pom)[:, None, :]], axis=1)
     i, j = np.triu_indices(pts.shape[1], k=1)
     contact_links = np.stack([pts[:, i], pts[:, j]], axis=-2).reshape(-1, 2, 3)

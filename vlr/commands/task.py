@@ -8,8 +8,8 @@ atomically. Arguments, environment options and the output folder are checked bef
 
 `--seeds 0-4` runs the task once per seed, each into OUT/seed-N (`--workers` of them at
 once, in processes), then writes OUT/summary.md (mean and SD over seeds of the headline
-figures, beside the paper's) and OUT/summary.csv (one row per seed): issue #6's "five seeds
-per task from one command".
+figures, beside the paper's) and OUT/summary.csv (one row per seed): five seeds per task
+from one command.
 
 `--policy MODULE:NAME` (or `FILE.py:NAME`, whose folder goes on the import path as a
 script's does) runs your policy instead of the baseline, with the same seeds, metrics,
