@@ -771,3 +771,322 @@ def evaluate_one(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
     return _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                      base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                      omass, ocom, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk)
+
+
+# --------------------------------------------------------------------------- the action path
+# A command change solved whole inside the kernel, particle by particle: the rolling substeps
+# (the contacts rolled after each, `vlr.surface.roll_contacts` without friction) and the
+# follow-up of a large move (`vlr.motion.MotionConfig.follow_substeps`), so that one call does
+# what `vlr.motion.MotionModel._solve` and `_follow` do with NumPy between kernel calls.
+
+SURF_PLANE, SURF_SPHERE, SURF_CYLINDER = 0, 1, 2
+# Indices into the float surface vector `srf`: kind, radius, the kernel's radius (a plane's
+# 10 m sphere), the cylinder's axis in O (3), 1/FLAT_CURVATURE.
+S_KIND, S_RADIUS, S_KERNEL, S_AXIS, S_FLAT_RADIUS, N_SRF = 0, 1, 2, 3, 6, 7
+
+
+@njit(cache=True)
+def _distal_rotation(rb, phi, out):
+    """out = R_PD = base_rot @ plane_rotation(phi) (`vlr.kinematics.plane_rotation`)."""
+    c, s = math.cos(phi), math.sin(phi)
+    for a in range(3):
+        out[a, 0] = rb[a, 0]
+        out[a, 1] = rb[a, 1] * c - rb[a, 2] * s
+        out[a, 2] = rb[a, 1] * s + rb[a, 2] * c
+
+
+@njit(cache=True)
+def _pad_points(i, th, seg, nrm, base_pos, rb, pad_xy, pad_r, p, R, sphi, cphi, qy, qz,
+                zero, cen, con):
+    """Finger i's pad centre `cen` and contact point `con` in the object frame O (3,)."""
+    for which in range(2):
+        fx, fy, fz = _finger_chain(th[i], seg[i], zero if which == 0 else nrm[i],
+                                   pad_xy[i, 0], pad_xy[i, 1], pad_r[i], sphi, cphi, qy, qz)
+        out = cen if which == 0 else con
+        for b in range(3):
+            t = 0.0
+            for a in range(3):
+                x = base_pos[i, a] + rb[a, 0] * fx + rb[a, 1] * fy + rb[a, 2] * fz - p[a]
+                t += R[a, b] * x
+            out[b] = t
+
+
+@njit(cache=True)
+def _surface_normals(th, nrm, base_rot, R, RD, m):
+    """m (N, 3): the object's outward normal at each contact, in O: minus the pad's
+    (`vlr.surface.surface_normals`)."""
+    n_f, k_n = th.shape
+    for i in range(n_f):
+        phi = 0.0
+        for k in range(k_n):
+            phi += th[i, k]
+        _distal_rotation(base_rot[i], phi, RD)
+        for b in range(3):
+            t = 0.0
+            for a in range(3):
+                npa = RD[a, 0] * nrm[i, 0] + RD[a, 1] * nrm[i, 1] + RD[a, 2] * nrm[i, 2]
+                t += R[a, b] * npa
+            m[i, b] = -t
+
+
+@njit(cache=True)
+def _rolling_frames(th, anc, R, m, rho_q, srf, has_rho, rl):
+    """rl (N, N_RL): the rolling term's frames without friction (`MotionModel.rolling_frames`,
+    forces 0): local centres a - rho m, the normals R m, the summed angles, R, rho."""
+    n_f, k_n = th.shape
+    for i in range(n_f):
+        rk = rho_q[i] if has_rho else srf[S_KERNEL]
+        for b in range(3):
+            rl[i, RL_CENTRE + b] = anc[i, b] - rk * m[i, b]
+            rl[i, RL_NORMAL + b] = R[b, 0] * m[i, 0] + R[b, 1] * m[i, 1] + R[b, 2] * m[i, 2]
+        phi = 0.0
+        for k in range(k_n):
+            phi += th[i, k]
+        rl[i, RL_PHI] = phi
+        for a in range(3):
+            for b in range(3):
+                rl[i, RL_ROT + 3 * a + b] = R[a, b]
+        rl[i, RL_FORCE] = 0.0
+        rl[i, RL_RHO] = rk
+
+
+@njit(cache=True)
+def _roll_contacts(th, seg, nrm, anc, p, R, m, rho_q, srf, has_rho, base_pos, base_rot,
+                   pad_xy, pad_r, sphi, cphi, qy, qz, zero, cen, con, RD):
+    """Each contact moved to where its pad now touches the object's local surface, in place
+    (`vlr.surface.roll_contacts` without friction; `m` the normals before the solve)."""
+    n_f, k_n = th.shape
+    kind = int(srf[S_KIND])
+    for i in range(n_f):
+        rb = base_rot[i]
+        _pad_points(i, th, seg, nrm, base_pos, rb, pad_xy, pad_r, p, R, sphi, cphi, qy, qz,
+                    zero, cen, con)
+        mx, my, mz = m[i, 0], m[i, 1], m[i, 2]
+        d0, d1, d2 = con[0] - anc[i, 0], con[1] - anc[i, 1], con[2] - anc[i, 2]
+        dn = d0 * mx + d1 * my + d2 * mz
+        t0, t1, t2 = d0 - dn * mx, d1 - dn * my, d2 - dn * mz
+        rk = rho_q[i] if has_rho else srf[S_KERNEL]
+        g0 = cen[0] - (anc[i, 0] - rk * mx)
+        g1 = cen[1] - (anc[i, 1] - rk * my)
+        g2 = cen[2] - (anc[i, 2] - rk * mz)
+        gap = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2) - (rk + pad_r[i])
+        ox, oy, oz = mx, my, mz
+        if not (kind == SURF_PLANE and not has_rho):
+            r = rho_q[i] if has_rho else srf[S_RADIUS]
+            if kind == SURF_CYLINDER:
+                a0, a1, a2 = srf[S_AXIS], srf[S_AXIS + 1], srf[S_AXIS + 2]
+                ma = mx * a0 + my * a1 + mz * a2
+                s0, s1, s2 = mx - ma * a0, my - ma * a1, mz - ma * a2
+                sl = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
+                if sl > 0.5:  # on the side (else an end face: flat)
+                    s0, s1, s2 = s0 / sl, s1 / sl, s2 / sl
+                    e0 = cen[0] - (anc[i, 0] - r * s0)
+                    e1 = cen[1] - (anc[i, 1] - r * s1)
+                    e2 = cen[2] - (anc[i, 2] - r * s2)
+                    ea = e0 * a0 + e1 * a1 + e2 * a2
+                    e0, e1, e2 = e0 - ea * a0, e1 - ea * a1, e2 - ea * a2
+                    el = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+                    if el > 0.0:
+                        ox, oy, oz = e0 / el, e1 / el, e2 / el
+                    else:
+                        ox, oy, oz = e0, e1, e2
+            else:
+                e0 = cen[0] - (anc[i, 0] - r * mx)
+                e1 = cen[1] - (anc[i, 1] - r * my)
+                e2 = cen[2] - (anc[i, 2] - r * mz)
+                el = math.sqrt(e0 * e0 + e1 * e1 + e2 * e2)
+                ox, oy, oz = e0 / el, e1 / el, e2 / el
+            if has_rho and r >= srf[S_FLAT_RADIUS]:
+                ox, oy, oz = mx, my, mz
+        reach = pad_r[i] + gap
+        anc[i, 0] = cen[0] - reach * ox - t0
+        anc[i, 1] = cen[1] - reach * oy - t1
+        anc[i, 2] = cen[2] - reach * oz - t2
+        phi = 0.0
+        for k in range(k_n):
+            phi += th[i, k]
+        _distal_rotation(rb, phi, RD)
+        # n_palm = -R out; n_D = RD^T n_palm
+        n0 = -(R[0, 0] * ox + R[0, 1] * oy + R[0, 2] * oz)
+        n1 = -(R[1, 0] * ox + R[1, 1] * oy + R[1, 2] * oz)
+        n2 = -(R[2, 0] * ox + R[2, 1] * oy + R[2, 2] * oz)
+        v0 = RD[0, 0] * n0 + RD[1, 0] * n1 + RD[2, 0] * n2
+        v1 = RD[0, 1] * n0 + RD[1, 1] * n1 + RD[2, 1] * n2
+        v2 = RD[0, 2] * n0 + RD[1, 2] * n1 + RD[2, 2] * n2
+        vl = math.sqrt(v0 * v0 + v1 * v1 + v2 * v2)
+        nrm[i, 0], nrm[i, 1], nrm[i, 2] = v0 / vl, v1 / vl, v2 / vl
+
+
+@njit(cache=True)
+def _path(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u_from, u_to, steps, rolling,
+          predict, rho, has_rho, srf, base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy,
+          pad_r, omass, ocom, grav, flags, prm, max_iter, sc):
+    """Particle q from its state at u_from to u_to in `steps` equal solves, the contacts
+    rolled after each (`rolling`); returns (status of the first failed solve or OK, the
+    iterations spent). `sc` holds the scratch buffers (`_scratch`)."""
+    (gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk, th_t, p_t, R_t, dth, dc, La, X, y, S,
+     col, th0, p0, tgt, mbuf, RD, zero, cen, con, th_prev, p_prev, R_prev) = sc
+    n_f, k_n = theta.shape[1], theta.shape[2]
+    rho_q = rho[q] if has_rho else rho[0]
+    th, p, R = theta[q], pos[q], rot[q]
+    total = 0
+    for j in range(1, steps + 1):
+        if steps == 1:
+            for i in range(n_f):
+                tgt[i] = u_to[i]
+        else:
+            frac = j / steps
+            for i in range(n_f):
+                tgt[i] = u_from[i] + (u_to[i] - u_from[i]) * frac
+        # The rolling frames first: they hold what the substep starts from.
+        if rolling:
+            _surface_normals(theta[q], nrm[q], base_rot, rot[q], RD, mbuf)
+            _rolling_frames(theta[q], anc[q], rot[q], mbuf, rho_q, srf, has_rho, roll[q])
+        if j > 1 and predict:
+            # Predictor: the substeps are equal command changes, so the last one's change of
+            # the configuration is the next one's first guess (a secant step along the
+            # path); Newton then corrects it, in one or two iterations where the path is
+            # smooth. th_prev, p_prev, R_prev hold the last substep's start.
+            for i in range(n_f):
+                for k in range(k_n):
+                    d = th[i, k] - th_prev[i, k]
+                    th_prev[i, k] = th[i, k]
+                    th[i, k] += d
+            # The rotation's change, vee(sym(R_prev^T R)), small: applied again, R exp(w).
+            w0 = w1 = w2 = 0.0
+            for a in range(3):
+                w0 += 0.5 * (R_prev[a, 2] * R[a, 1] - R_prev[a, 1] * R[a, 2])
+                w1 += 0.5 * (R_prev[a, 0] * R[a, 2] - R_prev[a, 2] * R[a, 0])
+                w2 += 0.5 * (R_prev[a, 1] * R[a, 0] - R_prev[a, 0] * R[a, 1])
+            for a in range(3):
+                d = p[a] - p_prev[a]
+                p_prev[a] = p[a]
+                p[a] += d
+                for b in range(3):
+                    R_prev[a, b] = R[a, b]
+            _rotate3(R_prev, w0, w1, w2, R)
+        else:
+            for i in range(n_f):
+                for k in range(k_n):
+                    th_prev[i, k] = th[i, k]
+            for a in range(3):
+                p_prev[a] = p[a]
+                for b in range(3):
+                    R_prev[a, b] = R[a, b]
+        st, it = _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, tgt,
+                            base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy,
+                            pad_r, omass, ocom, grav, flags, prm, max_iter,
+                            gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk,
+                            th_t, p_t, R_t, dth, dc, La, X, y, S, col, th0, p0)
+        total += it
+        if st != OK:
+            return st, total
+        if rolling:
+            _roll_contacts(theta[q], seg[q], nrm[q], anc[q], pos[q], rot[q], mbuf, rho_q, srf,
+                           has_rho, base_pos, base_rot, pad_xy, pad_r, sphi, cphi, qy, qz,
+                           zero, cen, con, RD)
+    return OK, total
+
+
+@njit(cache=True)
+def _scratch(n_f, k_n):
+    """Per-chunk scratch of `_path` (allocating per particle would cost more than a solve)."""
+    return (np.empty((n_f, k_n)), np.empty(6), np.empty((n_f, k_n, k_n)),
+            np.empty((n_f, k_n, 6)), np.empty((6, 6)), np.empty(k_n), np.empty(k_n),
+            np.empty(k_n), np.empty(k_n), np.empty((k_n, 3)), np.empty((3, 3)),
+            np.empty((6, 3)), np.empty((n_f, k_n)), np.empty(3), np.empty((3, 3)),
+            np.empty((n_f, k_n)), np.empty(6), np.empty((k_n, k_n)), np.empty((n_f, k_n, 6)),
+            np.empty((n_f, k_n)), np.empty((6, 6)), np.empty(k_n), np.empty((n_f, k_n)),
+            np.empty(3), np.empty(n_f), np.empty((n_f, 3)), np.empty((3, 3)), np.zeros(3),
+            np.empty(3), np.empty(3), np.empty((n_f, k_n)), np.empty(3), np.empty((3, 3)))
+
+
+@njit(parallel=True, cache=True)
+def solve_path_batch(theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u_from, u_to,
+                     substeps, follow, rolling, predict, rho, has_rho, srf,
+                     base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+                     omass, ocom, grav, flags, prm, max_iter, active, status, iters,
+                     followed):
+    """Every active particle from u_from to u_to (`_path` in `substeps` solves); one that
+    fails by a jump or no convergence is solved again from its start in `follow` equal
+    steps of `substeps` solves each, at twice the iterations (`MotionConfig.
+    follow_substeps`; 0 or 1: not). In place: the state, `active` (False after a failure),
+    `status` (the first attempt's failure if the follow-up fails too), `iters` and
+    `followed` (the follow-up was tried)."""
+    n_p, n_f, k_n = theta.shape
+    n_chunks = min(n_p, 64)
+    for ch in prange(n_chunks):
+        sc = _scratch(n_f, k_n)
+        th_s = np.empty((n_f, k_n))
+        nrm_s = np.empty((n_f, 3))
+        anc_s = np.empty((n_f, 3))
+        p_s = np.empty(3)
+        R_s = np.empty((3, 3))
+        u_a = np.empty(n_f)
+        u_b = np.empty(n_f)
+        start = ch * n_p // n_chunks
+        stop = (ch + 1) * n_p // n_chunks
+        for q in range(start, stop):
+            followed[q] = False
+            if not active[q]:
+                status[q] = INACTIVE
+                iters[q] = 0
+                continue
+            if follow > 1:
+                th_s[:] = theta[q]
+                nrm_s[:] = nrm[q]
+                anc_s[:] = anc[q]
+                p_s[:] = pos[q]
+                R_s[:] = rot[q]
+            st, it = _path(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u_from, u_to,
+                           substeps, rolling, predict, rho, has_rho, srf, base_pos, base_rot,
+                           radii,
+                           rest, lo, hi, lmass, lcom, pad_xy, pad_r, omass, ocom, grav, flags,
+                           prm, max_iter, sc)
+            if follow > 1 and (st == JUMP or st == NO_CONVERGENCE):
+                followed[q] = True
+                theta[q] = th_s
+                nrm[q] = nrm_s
+                anc[q] = anc_s
+                pos[q] = p_s
+                rot[q] = R_s
+                u_a[:] = u_from
+                ok = True
+                for j in range(1, follow + 1):
+                    frac = j / follow
+                    for i in range(n_f):
+                        u_b[i] = u_from[i] + (u_to[i] - u_from[i]) * frac
+                    st2, it2 = _path(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u_a,
+                                     u_b, substeps, rolling, predict, rho, has_rho, srf,
+                                     base_pos,
+                                     base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy,
+                                     pad_r, omass, ocom, grav, flags, prm, 2 * max_iter, sc)
+                    it += it2
+                    if st2 != OK:
+                        ok = False
+                        break
+                    u_a[:] = u_b
+                if ok:
+                    st = OK
+            status[q] = st
+            iters[q] = it
+            active[q] = st == OK
+
+
+@njit(parallel=True, cache=True)
+def evaluate_batch(theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
+                   base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
+                   omass, ocom, grav, flags, prm, energy):
+    """The energy, gradient and Hessian of every particle at its state (the energies into
+    `energy`): what one Newton iteration evaluates, for `vlr bench --profile`."""
+    n_p, n_f, k_n = theta.shape
+    n_chunks = min(n_p, 64)
+    for ch in prange(n_chunks):
+        sc = _scratch(n_f, k_n)
+        gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk = sc[:12]
+        for q in range((ch * n_p) // n_chunks, ((ch + 1) * n_p) // n_chunks):
+            rl = roll[q] if flags[ROLLING] != 0 else roll[0]
+            energy[q] = _evaluate(theta[q], seg[q], nrm[q], anc[q], rl, pos[q], rot[q],
+                                  stiff[q], kt[q], u, base_pos, base_rot, radii, rest, lo, hi,
+                                  lmass, lcom, pad_xy, pad_r, omass[q], ocom[q], grav, flags,
+                                  prm, gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk)

@@ -345,8 +345,9 @@ class ParticleFilter:
         self._init_cfg = replace(self.config.motion, jump_theta=self.config.init_jump_theta,
                                  jump_pos=0.05, max_iter=max(self.config.motion.max_iter, 100))
         # Seconds per phase of the last iteration (motion, observation, weights, resampling,
-        # jitter, summary), for `vlr bench`.
+        # jitter, summary) and what its solves took, for `vlr bench`.
         self.timings: dict[str, float] = {}
+        self.profile: dict[str, float] = {}
 
     # ---- packing of the sampled dimensions
 
@@ -450,10 +451,16 @@ class ParticleFilter:
         self.command = np.asarray(command, dtype=float).copy()
         self.iteration += 1
         t0 = time.perf_counter()
-        _, iters = self.motion.solve(self.state, self.command, u_from=previous)
-        # Median Newton iterations of the action solve and of the post-jitter settle
-        # (`vlr bench` reports them: they are what a filter iteration costs).
+        status, iters = self.motion.solve(self.state, self.command, u_from=previous)
+        # Newton iterations of the action solve and of the post-jitter settle, failures and
+        # follow-ups (`vlr bench`: they are what a filter iteration costs).
         self.newton_iterations = {"action": float(np.median(iters))}
+        tried = status != 4   # INACTIVE: invalid before the action
+        self.profile = {"action_mean": float(iters[tried].mean()) if tried.any() else 0.0,
+                        "action_p99": float(np.quantile(iters, 0.99)),
+                        "failed_share": float(np.mean(tried & (status != 0))),
+                        "followed_share": float(np.mean(self.motion.followed))
+                        if len(self.motion.followed) == len(iters) else 0.0}
         if observation is not None and not self.state.valid.any():
             self._recover(observation)
         self.timings = {"motion": time.perf_counter() - t0}
@@ -592,6 +599,8 @@ class ParticleFilter:
         self.project_status = np.bincount(status, minlength=5)
         self.project_status[0] += state.n - len(idx)
         self.newton_iterations["settle"] = float(np.median(iters)) if len(idx) else 0.0
+        self.profile.update(settle_mean=float(iters.mean()) if len(idx) else 0.0,
+                            settled_share=len(idx) / state.n)
         residuals = sub.contact_residuals(self.model)
         sub.pos[...] = state.pos[idx]
         sub.rot[...] = state.rot[idx]

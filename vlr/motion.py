@@ -41,6 +41,7 @@ from vlr import _energy_kernels as kern
 from vlr.kinematics import HandModel, contact_in_distal, contact_points, plane_rotation
 from vlr.spec import ObjectSpec
 from vlr.surface import (
+    FLAT_CURVATURE,
     LocalSurface,
     contact_radii,
     local_centres,
@@ -81,6 +82,8 @@ _OBJECT_MASS, _OBJECT_COM = 10, 11
 # iterations of a solve (`MotionModel._solve`).
 RELAX_ITERATIONS = 8
 
+PREDICT = True
+
 STATUS = {kern.OK: "ok", kern.NONFINITE: "non-finite", kern.NO_CONVERGENCE: "no convergence",
           kern.JUMP: "jump", kern.INACTIVE: "inactive"}
 
@@ -108,8 +111,11 @@ class MotionConfig:
             of ~0.02 N m sink 0.01 degree into a stop.
         gravity: gravity vector in the palm frame [m/s^2]; default palm up.
         max_iter: Newton iterations (including rejected LM trials) per solve.
-        tol_theta: convergence: largest angle step [rad] (also used for the rotation step).
-        tol_pos: convergence: object position step [m].
+        tol_theta: convergence: largest angle step [rad] (also used for the rotation step);
+            1e-5 rad is 0.0006 degree, some 700 times under the likelihood's finest scale
+            (0.4 degree), where tighter tolerances cost iterations the likelihood cannot
+            see (`vlr bench --profile`).
+        tol_pos: convergence: object position step [m]; 1 um, 200 times under 0.2 mm.
         max_step_theta: step limit per Newton iteration [rad].
         max_step_pos: step limit per Newton iteration [m].
         jump_theta: a solve that moves any joint more than this is another branch [rad].
@@ -126,8 +132,8 @@ class MotionConfig:
     limit_stiffness: float = 100.0
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     max_iter: int = 30
-    tol_theta: float = 1e-6
-    tol_pos: float = 1e-7
+    tol_theta: float = 1e-5
+    tol_pos: float = 1e-6
     max_step_theta: float = 0.1
     max_step_pos: float = 0.005
     jump_theta: float = 0.25
@@ -418,6 +424,8 @@ class MotionModel:
         self.obj = obj
         self.config = config or MotionConfig()
         self.friction = friction or PadFriction()
+        # The particles of the last solve that needed the follow-up of a large move.
+        self.followed = np.zeros(0, dtype=bool)
         lim = model.limits
         self._shared = (
             np.ascontiguousarray(model.base_pos), np.ascontiguousarray(model.base_rot),
@@ -432,6 +440,14 @@ class MotionModel:
         self._prm = self._params(self.config)
         self._prm_settle = self._params(self.config, history=False)
         self._no_roll = np.zeros((1, model.n_fingers, kern.N_RL))
+        surf = obj.surface
+        self._surface = np.zeros(kern.N_SRF)
+        self._surface[kern.S_KIND] = {"plane": kern.SURF_PLANE, "sphere": kern.SURF_SPHERE,
+                                      "cylinder": kern.SURF_CYLINDER}[surf.kind]
+        self._surface[kern.S_RADIUS] = surf.radius
+        self._surface[kern.S_KERNEL] = surf.kernel_radius
+        self._surface[kern.S_AXIS:kern.S_AXIS + 3] = surf.axis
+        self._surface[kern.S_FLAT_RADIUS] = 1.0 / FLAT_CURVATURE
         self._own_object: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def _params(self, cfg: MotionConfig, history: bool = True) -> np.ndarray:
@@ -524,11 +540,44 @@ class MotionModel:
             status (P,) int8 codes (`STATUS`), iterations (P,) int32 (summed over substeps).
         """
         cfg = config or self.config
-        follow = u_from is not None and cfg.follow_substeps > 1
+        if u_from is None or not (cfg.rolling and self.friction.on):
+            return self._solve_path(state, u, cfg, config is not None, u_from)
+        # The pads' friction (`vlr gap`'s rung): its relax and normal forces run in NumPy.
+        follow = cfg.follow_substeps > 1
         start = state.copy() if follow else None
         status, iters = self._solve(state, u, cfg, config is not None, u_from)
         if follow:
             self._follow(state, start, u, u_from, cfg, status, iters)
+        return status, iters
+
+    def _solve_path(self, state: ParticleState, u: np.ndarray, cfg: MotionConfig,
+                    custom: bool, u_from: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """`solve` without the pads' friction, whole in one kernel call
+        (`vlr._energy_kernels.solve_path_batch`): the rolling substeps, the contacts rolled
+        after each, and the follow-up of a large move, particle by particle."""
+        history = u_from is not None
+        prm = (self._params(cfg, history) if custom
+               else self._prm if history else self._prm_settle)
+        flags = cfg.flags() if custom else self._flags
+        n = self.model.n_fingers
+        u = np.ascontiguousarray(u, dtype=float).reshape(n)
+        u0 = u if u_from is None else np.ascontiguousarray(u_from, dtype=float).reshape(n)
+        substeps = cfg.rolling_substeps if (cfg.rolling and history) else 1
+        follow = cfg.follow_substeps if history else 0
+        rho = self.contact_rho(state)
+        has_rho = rho is not None
+        rho = (np.ascontiguousarray(rho, dtype=float) if has_rho
+               else np.zeros((1, n)))
+        roll = (np.empty((state.n, n, kern.N_RL)) if cfg.rolling else self._no_roll)
+        status = np.empty(state.n, dtype=np.int8)
+        iters = np.zeros(state.n, dtype=np.int32)
+        self.followed = np.zeros(state.n, dtype=np.bool_)
+        kern.solve_path_batch(state.theta, state.segments, state.normals, state.anchors, roll,
+                              state.pos, state.rot, state.stiffness, state.tendon, u0, u,
+                              substeps, follow, cfg.rolling, PREDICT, rho, has_rho,
+                              self._surface,
+                              *self._shared_for(cfg, state), flags, prm, int(cfg.max_iter),
+                              state.valid, status, iters, self.followed)
         return status, iters
 
     def _solve(self, state: ParticleState, u: np.ndarray, cfg: MotionConfig, custom: bool,

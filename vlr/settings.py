@@ -253,12 +253,21 @@ def _describe(kind: Any) -> str:
         return "one of " + ", ".join(map(str, args))
     if origin is tuple:
         if len(args) == 2 and args[1] is Ellipsis:
-            return f"a list of {_describe(args[0])}s"
-        return f"a list of {len(args)} {_describe(args[0])}s"
+            return f"a list of {_plural(args[0])}"
+        return f"a list of {len(args)} {_plural(args[0])}"
     if origin is dict:
         return "a mapping"
     return {bool: "true or false", int: "an integer", float: "a number", str: "a name",
             Any: "anything"}.get(kind, getattr(kind, "__name__", str(kind)))
+
+
+def _plural(kind: Any) -> str:
+    """`_describe` of a list's items: "numbers", not "a numbers"."""
+    text = _describe(kind)
+    for article in ("a ", "an "):
+        if text.startswith(article):
+            return text[len(article):] + "s"
+    return text
 
 
 def flatten(obj: Any, prefix: str = "") -> dict[str, Any]:

@@ -1,12 +1,17 @@
-"""`vlr bench`: time one particle-filter iteration (Algorithm 1) at several particle counts.
+"""`vlr bench`: one particle-filter iteration (Algorithm 1) timed at several particle counts,
+against a yardstick measured in the same run.
 
-Each phase is timed separately: motion (Eq. 9 solve), observation (Eq. 5 likelihood), weights
-(tempering), resampling, jitter; "total" is their sum, "summary" (per-iteration quantiles for
-history) is reported apart. The world is the synthetic one (vlr.synthetic) holding the apple,
-and the filter is built from the settings tree as `vlr identify` builds it (`vlr.settings`), so
-the numbers are those of a real identification run's iterations. `--contacts rolling` (the
-default: what `vlr identify` runs on the sim and the real hand) times the rolling motion model,
-`pinned` the pinned one (the synthetic world's default).
+The filter is built from the settings tree as `vlr identify` builds it on the sim
+(`vlr.settings`: rolling contacts, the turn term, the stops at 17 N m/rad), and the world is
+the synthetic one holding the apple, so that the iterations are a real run's. Each phase is
+timed apart: motion (the Eq. 9 solve of the action), observation (Eq. 5), weights (tempering),
+resampling, jitter (the Liu-West draw and the settle of the jittered particles); "total" is
+their sum, "summary" (quantiles for the history) is reported apart. The yardstick is one
+batched `np.linalg.solve` of P 12x12 systems, the linear algebra of one Newton step for every
+particle: the machine's own speed, so that a ratio to it compares across machines.
+`--profile` adds what the iterations are made of: Newton iterations per particle (median,
+mean, 99th percentile) of the action and of the settle, the share of particles that failed or
+needed the follow-up of a large move, and the cost of one energy evaluation per term.
 """
 
 from __future__ import annotations
@@ -23,33 +28,50 @@ CONTACTS = ("rolling", "pinned")
 
 def register(subparsers: argparse._SubParsersAction) -> None:
     p = subparsers.add_parser("bench", help="time one filter iteration at 6k, 60k, 600k "
-                              "particles", description=__doc__)
+                              "particles against a yardstick", description=__doc__,
+                              formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--particles", type=int, nargs="+", default=[6_000, 60_000, 600_000],
                    help="particle counts (default: 6000 60000 600000)")
     p.add_argument("--repeats", type=int, default=5, help="iterations timed per count")
     p.add_argument("--json", type=Path, default=None,
-                   help="write the contacts timed, {particles: median seconds per iteration} "
-                        "and each count's per-phase medians to this file")
+                   help="write every figure to this file")
     p.add_argument("--seed", type=int, default=0)
     p.add_argument("--contacts", choices=CONTACTS, default="rolling",
                    help="the motion model timed: rolling contacts (default; the sim's and the "
                         "real hand's) or pinned ones")
+    p.add_argument("--profile", action="store_true",
+                   help="also Newton iterations, failures and follow-ups, and the cost per "
+                        "energy term")
     p.set_defaults(func=run)
 
 
-def bench_one(n_particles: int, repeats: int, seed: int = 0,
-              contacts: str = "rolling") -> dict[str, float]:
-    """Median seconds per phase of `repeats` filter iterations with n_particles."""
+def yardstick(n_particles: int, repeats: int = 5, seed: int = 0) -> float:
+    """Median seconds of one batched `np.linalg.solve` of n_particles SPD 12x12 systems."""
+    rng = np.random.default_rng(seed)
+    a = rng.standard_normal((n_particles, 12, 12))
+    a = a @ a.transpose(0, 2, 1) + 12 * np.eye(12)
+    b = rng.standard_normal((n_particles, 12, 1))
+    times = []
+    for _ in range(repeats):
+        t = time.perf_counter()
+        np.linalg.solve(a, b)
+        times.append(time.perf_counter() - t)
+    return float(np.median(times))
+
+
+def _filter(n_particles: int, seed: int, contacts: str):
+    """The filter as `vlr identify` builds it on the sim, initialised on the synthetic world
+    holding the apple, and that world."""
     from vlr.filter import ParticleFilter
     from vlr.kinematics import HandModel
     from vlr.motion import ObjectParams
     from vlr.settings import load_settings
     from vlr.spec import load_hand, load_object
-    from vlr.synthetic import SyntheticConfig, SyntheticWorld, random_action
+    from vlr.synthetic import SyntheticConfig, SyntheticWorld
+    from vlr.world import grasp_guess
 
-    settings = load_settings({"world.backend": "synthetic", "world.object": "apple",
-                              "filter.particles": n_particles, "seed": seed,
-                              "filter.motion.rolling": contacts == "rolling"})
+    settings = load_settings({"world.backend": "sim", "filter.particles": n_particles,
+                              "seed": seed, "filter.motion.rolling": contacts == "rolling"})
     model = HandModel.from_spec(load_hand(settings.world.hand))
     obj = ObjectParams.from_spec(load_object(settings.world.object))
     # The bench times the filter, not the grasp: a snap-through of the world (a grasp at a
@@ -57,12 +79,23 @@ def bench_one(n_particles: int, repeats: int, seed: int = 0,
     world = SyntheticWorld(model, obj, SyntheticConfig(seed=seed, snap_theta=np.pi,
                                                        motion=settings.filter.motion))
     u = world.grasp()
+    nominal = grasp_guess(settings, model, obj)
     pf = ParticleFilter(model, obj, settings.filter, seed)
-    pf.initialize(world.observe(), u, world.nominal.theta, world.nominal.contact)
+    pf.initialize(world.observe(), u, nominal.theta, nominal.contact)
+    return pf, world
+
+
+def bench_one(n_particles: int, repeats: int, seed: int = 0, contacts: str = "rolling",
+              profile: bool = False) -> dict[str, float]:
+    """Median seconds per phase of `repeats` filter iterations with n_particles, the Newton
+    iterations, and with `profile` the iterations' spread and the failures."""
+    from vlr.synthetic import random_action
+
+    pf, world = _filter(n_particles, seed, contacts)
     rng = np.random.default_rng(seed + 1)
     rows = []
     for _ in range(repeats + 1):  # the first iteration also settles the prior: not timed
-        u = world.apply(random_action(rng, model.n_fingers))
+        u = world.apply(random_action(rng, pf.model.n_fingers))
         obs = world.observe()
         t0 = time.perf_counter()
         pf.step(u, obs)
@@ -71,9 +104,42 @@ def bench_one(n_particles: int, repeats: int, seed: int = 0,
         row["total"] = sum(row[k] for k in PHASES)
         row["wall"] = wall
         row.update({f"newton_{k}": v for k, v in pf.newton_iterations.items()})
+        if profile:
+            row.update(pf.profile)
         rows.append(row)
     rows = rows[1:]
     return {k: float(np.median([r[k] for r in rows])) for k in rows[0]}
+
+
+def term_costs(n_particles: int, seed: int = 0, repeats: int = 3) -> dict[str, float]:
+    """Microseconds per particle of one energy evaluation (energy, gradient and Hessian) with
+    each term alone, and with all of the filter's terms, on n_particles copies of the
+    bench's particles (so that the kernel's start-up does not count)."""
+    from vlr import _energy_kernels as kern
+    from vlr.motion import TERMS
+
+    pf, _ = _filter(min(n_particles, 6_000), seed, "rolling")
+    m = pf.motion
+    st = pf.state.take(np.resize(np.arange(pf.state.n), n_particles))  # n_particles of them
+    roll = m.rolling_frames(st, forces=False)
+    shared = m._shared_for(m.config, st)
+    out = {}
+    for name in (*TERMS, "all"):
+        flags = m.config.flags() if name == "all" else np.zeros(kern.N_TERMS, dtype=np.int64)
+        if name != "all":
+            flags[TERMS[name]] = 1
+            if name == "rolling":
+                flags[kern.CONTACTS] = 1
+        energy = np.empty(st.n)
+        times = []
+        for _ in range(repeats):
+            t = time.perf_counter()
+            kern.evaluate_batch(st.theta, st.segments, st.normals, st.anchors, roll, st.pos,
+                                st.rot, st.stiffness, st.tendon, pf.command, *shared, flags,
+                                m._prm, energy)
+            times.append(time.perf_counter() - t)
+        out[name] = float(np.median(times)) / st.n * 1e6
+    return out
 
 
 def run(args: argparse.Namespace) -> int:
@@ -84,25 +150,47 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--particles {bad[0]} must be >= 10")
     if args.repeats < 1:
         raise UserError(f"--repeats {args.repeats} must be >= 1")
-    from vlr._energy_kernels import solve_batch  # noqa: F401  (compile/load the cache first)
+    from vlr._energy_kernels import solve_path_batch  # noqa: F401  (compile/load the cache)
     from vlr.io import write_json_atomic
 
     results: dict[int, dict[str, float]] = {}
-    header = (f"{'particles':>10} " + " ".join(f"{k:>11}" for k in (*PHASES, "total",
-                                                                      "summary"))
-              + "   Newton iterations (action, settle)")
-    print(f"{args.contacts} contacts, the synthetic world holding the apple")
-    print(header)
+    print(f"{args.contacts} contacts, the synthetic world holding the apple, the sim's "
+          "filter settings; seconds are medians over the iterations")
+    print(f"{'particles':>10} " + " ".join(f"{k:>11}" for k in (*PHASES, "total"))
+          + f" {'yardstick':>10} {'ratio':>6}   Newton iterations (action, settle)")
     for n in args.particles:
-        med = bench_one(n, args.repeats, args.seed, args.contacts)
+        med = bench_one(n, args.repeats, args.seed, args.contacts, args.profile)
+        med["yardstick"] = yardstick(n, seed=args.seed)
+        med["ratio"] = med["total"] / med["yardstick"]
         results[n] = med
-        print(f"{n:>10} " + " ".join(f"{med[k]:>10.4f}s" for k in (*PHASES, "total",
-                                                                    "summary"))
-              + f"   {med.get('newton_action', float('nan')):.0f}, "
+        print(f"{n:>10} " + " ".join(f"{med[k]:>10.4f}s" for k in (*PHASES, "total"))
+              + f" {med['yardstick']:>9.4f}s {med['ratio']:>6.1f}   "
+              f"{med.get('newton_action', float('nan')):.0f}, "
               f"{med.get('newton_settle', float('nan')):.0f}", flush=True)
+    if len(results) > 1:
+        counts = sorted(results)
+        for a, b in zip(counts, counts[1:], strict=False):
+            print(f"{b} / {a} particles: {results[b]['total'] / results[a]['total']:.1f}x the "
+                  f"time for {b / a:.0f}x the particles")
+    costs = None
+    if args.profile:
+        for n, med in results.items():
+            print(f"\n{n} particles, per particle: action {med['action_mean']:.1f} Newton "
+                  f"iterations (median {med['newton_action']:.0f}, 99th percentile "
+                  f"{med['action_p99']:.0f}), settle {med['settle_mean']:.1f} over the "
+                  f"{med['settled_share']:.0%} jittered; failed {med['failed_share']:.2%}, "
+                  f"followed {med['followed_share']:.2%}; "
+                  f"{med['motion'] / max(med['action_mean'], 1e-9) / n * 1e6:.2f} us per "
+                  "particle-iteration of the action")
+        costs = term_costs(60_000, args.seed)
+        print("\none energy evaluation per particle [us]: "
+              + ", ".join(f"{k} {v:.2f}" for k, v in costs.items()))
     if args.json is not None:
         write_json_atomic(args.json, {
             "contacts": args.contacts,
             "seconds_per_iteration": {str(n): r["total"] for n, r in results.items()},
-            "medians": {str(n): r for n, r in results.items()}})
+            "yardstick_seconds": {str(n): r["yardstick"] for n, r in results.items()},
+            "ratio_to_yardstick": {str(n): r["ratio"] for n, r in results.items()},
+            "medians": {str(n): r for n, r in results.items()},
+            **({"energy_term_us": costs} if costs else {})})
     return 0
