@@ -3,17 +3,19 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup install demo test lint
+.PHONY: setup install identify test lint
 
-setup: install demo
+setup: install identify
 
 install:
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	$(BIN)/pip install -q -c constraints.txt -e '.[dev,cluster]'
 
-demo:
-	$(BIN)/vlr demo --object apple --seed 0
+# The main job on the embedded defaults: the sim identifies its grasp of the apple.
+identify:
+	$(BIN)/vlr identify --object apple --particles 6000 --max-iterations 10 --quiet \
+		--out runs/setup
 
 test:
 	$(BIN)/python -m pytest -q

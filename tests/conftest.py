@@ -9,11 +9,11 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 TINY_SWEEP = """\
 name: tiny
 seeds: 0-1
-settings: {backend: synthetic, particles: 200, max_iterations: 2}
+settings: {world.backend: synthetic, filter.particles: 200, loop.max_iterations: 2}
 cases:
   - {name: known hand}
-  - {name: stiffness, unknowns: ["stiffness:thumb.distal"],
-     true_stiffness: {thumb.distal: 0.045}}
+  - {name: stiffness, filter.unknowns: ["stiffness:thumb.distal"],
+     world.options.true_stiffness: {thumb.distal: 0.045}}
 """
 
 

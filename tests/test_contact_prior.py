@@ -7,7 +7,7 @@ from scipy.spatial.transform import Rotation
 
 from vlr.filter import FilterConfig, ParticleFilter
 from vlr.kinematics import HandModel, angles_from_normals, contact_points
-from vlr.motion import ObjectParams
+from vlr.motion import MotionConfig, ObjectParams
 from vlr.spec import load_hand
 from vlr.surface import LocalSurface, _distal_rotations, surface_contact_normals
 
@@ -90,8 +90,10 @@ def test_the_surface_prior_centres_the_contacts_and_a_bad_prior_is_named():
     obs = type("Obs", (), {"position": np.array([0.0, 0.0, 0.06]), "rotation": np.eye(3)})()
     spread = {}
     for prior in ("pad", "surface"):
-        pf = ParticleFilter(MODEL, obj, FilterConfig(n_particles=400, seed=3,
-                                                     contact_prior=prior))
+        # Pinned contacts: the prior's settle leaves each drawn contact where it was drawn.
+        cfg = FilterConfig(particles=400, contact_prior=prior,
+                           motion=MotionConfig(rolling=False))
+        pf = ParticleFilter(MODEL, obj, cfg, seed=3)
         pf._sample_prior(obs, np.zeros(3), nominal_theta, np.zeros((3, 2)))
         spread[prior] = np.degrees(np.stack(angles_from_normals(pf.state.normals), -1))
     # The pad prior sits about the inner face; the sphere's puts the side fingers' contacts

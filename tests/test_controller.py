@@ -210,9 +210,9 @@ def test_secant_fit_and_update_recover_a_linear_map_the_vlr_misses():
 def identified_synthetic():
     """A synthetic world and a filter identified on it (small, quick)."""
     from vlr.filter import FilterConfig
-    from vlr.identify import IdentifyConfig, identify
+    from vlr.identify import LoopConfig, identify
     from vlr.kinematics import HandModel
-    from vlr.motion import ObjectParams
+    from vlr.motion import MotionConfig, ObjectParams
     from vlr.spec import load_hand, load_object
     from vlr.synthetic import SyntheticConfig, SyntheticWorld
 
@@ -220,9 +220,10 @@ def identified_synthetic():
     obj = ObjectParams.from_spec(load_object("apple"))
     world = SyntheticWorld(model, obj, SyntheticConfig(seed=0))
     box = {}
-    identify(world, world.observe, model, obj, world.nominal,
-             IdentifyConfig(max_iterations=12, filter=FilterConfig(n_particles=1500, seed=0)),
-             watch=lambda pf, rec: box.update(pf=pf))
+    # The synthetic world's own model (pinned contacts), its prior about the pads' contacts.
+    cfg = FilterConfig(particles=1500, motion=MotionConfig(rolling=False), contact_prior="pad")
+    identify(world, world.observe, model, obj, world.nominal, cfg,
+             LoopConfig(max_iterations=12), seed=0, watch=lambda pf, rec: box.update(pf=pf))
     return world, box["pf"]
 
 

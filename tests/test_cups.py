@@ -6,6 +6,7 @@ identification keep it to about a minute; the five-seed figures are in docs/TASK
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -17,6 +18,8 @@ from tests.env_rollout import rollout, same
 from vlr.errors import UserError
 
 QUICK = {"particles": 2000, "identify_iterations": 1, "n_cups": 1}
+# The hardware backend's example: emulated motors driving the simulated hand.
+SIM_HARDWARE = str(Path(__file__).parents[1] / "hardware" / "example_sim_config.yaml")
 
 
 def test_cup_stacking_passes_the_env_checker_and_renders():
@@ -46,11 +49,11 @@ def test_cup_stacking_is_deterministic_for_a_seed():
 def test_cup_stacking_refuses_the_hardware_backend_in_one_line(tmp_path, capsys):
     with pytest.raises(UserError, match="arm"):
         gym.make(tasks.CUP_STACKING, backend="hardware",
-                 hardware_config="hardware/example_sim_config.yaml")
+                 hardware_config=SIM_HARDWARE)
     from vlr.cli import main
 
     assert main(["task", "cups", "--backend", "hardware", "--config",
-                 "hardware/example_sim_config.yaml", "--out", str(tmp_path / "o")]) == 2
+                 SIM_HARDWARE, "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
     assert "arm" in err and "Traceback" not in err
 

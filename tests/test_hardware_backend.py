@@ -291,9 +291,11 @@ def test_tensions_from_the_settled_currents(tmp_path):
     """With a `tension` calibration each move reports tendon tensions from the motors'
     present current once they stop, T = newton_per_ma x (direction x current - zero_ma), at
     least 0;
-    without one, none (and a trial that weighs tensions is refused before the hand moves)."""
+    without one, none (and an identification that weighs tensions is refused before the hand
+    moves)."""
     from vlr.errors import UserError
-    from vlr.trial import TrialSettings, open_world
+    from vlr.settings import load_settings
+    from vlr.world import open_world
 
     cfg = make_config(tmp_path, fingers=STORED,
                       tension={"newton_per_ma": 0.18, "zero_ma": [5.0, 5.0, 5.0]})
@@ -314,4 +316,6 @@ def test_tensions_from_the_settled_currents(tmp_path):
         assert hand.grasp().tensions is None
     path = write_config(tmp_path, config_dict(fingers=STORED), "plain.yaml")
     with pytest.raises(UserError, match="does not report tendon tensions"):
-        open_world(TrialSettings(backend="hardware", config=str(path), sigma_tension_n=0.5))
+        open_world(load_settings({"world.backend": "hardware",
+                                  "world.options.config": str(path),
+                                  "filter.observation.sigma_tension_n": 0.5}))

@@ -17,8 +17,12 @@ def test_identify_synthetic_writes_result_history_and_plot(tmp_path):
     for key in ("converged", "iterations", "coverage", "timing"):
         assert key in result
     assert result["iterations"] == 3
-    # The likelihood in effect is recorded (the synthetic world has no turn term).
-    assert result["sigma"] == [0.1, 0.4] and result["sigma_turn_deg"] == 0.0
+    # Every setting in effect is recorded (the synthetic world's likelihood has no turn term).
+    s = result["settings"]
+    assert (s["filter.observation.sigma_pos_mm"], s["filter.observation.sigma_rot_deg"],
+            s["filter.observation.sigma_turn_deg"]) == (0.1, 0.4, 0.0)
+    assert (s["world.backend"], s["filter.particles"], s["loop.max_iterations"], s["seed"]) == (
+        "synthetic", 1500, 3, 1)
     assert {"proximal_deg_mean", "distal_deg_mean", "contact_mm_mean"} <= set(result["errors"])
     hist = np.load(out / "history.npz")
     assert hist["mean"].shape[0] == 4  # the initial update plus three actions
@@ -57,7 +61,8 @@ def test_identify_records_each_unknowns_error_per_iteration(tmp_path):
     out = tmp_path / "stiff"
     rc = main(["identify", "--backend", "synthetic", "--particles", "1500",
                "--max-iterations", "2", "--seed", "2", "--unknown", "stiffness:thumb.distal",
-               "--true-stiffness", "thumb.distal=0.045", "--out", str(out), "--quiet"])
+               "--set", "world.options.true_stiffness={thumb.distal: 0.045}", "--out", str(out),
+               "--quiet"])
     assert rc == 0
     result = json.loads((out / "result.json").read_text())
     path = result["unknown_error_by_iteration"]["stiffness:thumb.distal"]
@@ -107,43 +112,44 @@ def test_identify_scores_the_objects_unknowns(tmp_path):
 
 def test_a_believed_mass_moves_the_mass_prior_and_not_the_world(tmp_path):
     _, hist = _gelatin_box(tmp_path / "believed", "--particles", "1000", "--max-iterations",
-                           "1", "--unknown", "mass", "--object-mass", "0.2")
+                           "1", "--unknown", "mass", "--set", "filter.object.mass=0.2")
     np.testing.assert_allclose(hist["truth_unknowns"], 0.097, rtol=1e-9)  # the spec's
     assert 0.05 <= hist["low"][0, -1] and hist["high"][0, -1] <= 0.8    # 0.25-4x 0.2 kg
     assert hist["high"][0, -1] > 0.4    # the prior about the believed 0.2, not the spec's
-    _refused(tmp_path, "--object-mass", "-1")
+    _refused(tmp_path, "--set", "filter.object.mass=-1")
 
 
 def test_a_believed_centre_of_mass_moves_the_com_prior_and_not_the_world(tmp_path):
     result, hist = _gelatin_box(tmp_path / "com", "--particles", "1000", "--max-iterations",
-                                "1", "--unknown", "com:x", "--object-com", "0.01", "0", "0.016")
+                                "1", "--unknown", "com:x", "--set",
+                                "filter.object.com=[0.01, 0, 0.016]")
     np.testing.assert_allclose(hist["truth_unknowns"], 0.0, atol=1e-12)   # the spec's x
     assert -0.005 <= hist["low"][0, -1] and hist["high"][0, -1] <= 0.025  # 0.01 +- 0.015
-    assert result["settings"]["object_com"] == [0.01, 0.0, 0.016]
-    _refused(tmp_path, "--object-com", "0", "nan", "0")
+    assert result["settings"]["filter.object.com"] == [0.01, 0.0, 0.016]
+    _refused(tmp_path, "--set", "filter.object.com=[0, .nan, 0]")
+    _refused(tmp_path, "--set", "filter.object.com=[0, 0]")
 
 
 def test_identify_scores_the_curvature_and_a_believed_one_moves_its_prior(tmp_path):
     result, hist = _gelatin_box(tmp_path / "k", "--particles", "1000", "--max-iterations",
-                                "1", "--unknown", "curvature", "--object-curvature", "40")
+                                "1", "--unknown", "curvature", "--set",
+                                "filter.object.curvature=40")
     np.testing.assert_allclose(hist["truth_unknowns"], 0.0)   # the world's box stays flat
     assert 0.0 <= hist["low"][0, -1] and 60.0 < hist["high"][0, -1] <= 80.0  # 0..2 x 40 /m
     np.testing.assert_allclose(result["errors"]["curvature_per_m"]["all"],
                                abs(hist["mean"][-1, -1]), rtol=1e-6)
-    assert result["settings"]["object_curvature"] == 40.0
-    _refused(tmp_path, "--object-curvature", "-1")
+    assert result["settings"]["filter.object.curvature"] == 40.0
+    _refused(tmp_path, "--set", "filter.object.curvature=-1")
 
 
 def test_a_prior_of_ones_own_bounds_an_unknown(tmp_path):
     result, hist = _gelatin_box(tmp_path / "p", "--particles", "1000", "--max-iterations", "1",
-                                "--unknown", "mass", "--prior", "mass=0.05,0.15")
+                                "--unknown", "mass", "--set", "filter.priors={mass: [0.05, 0.15]}")
     assert 0.05 <= hist["low"][0, -1] and hist["high"][0, -1] <= 0.15
-    assert result["settings"]["priors"] == {"mass": [0.05, 0.15]}
-    for bad in ("mass=0.2,0.1", "mass=0,1", "com:x=0,1"):
-        _refused(tmp_path, "--unknown", "mass", "--prior", bad)
-    _refused(tmp_path, "--unknown", "mass", "--prior", "mass=0.05,0.1", "--prior", "mass=0.1,0.2")
-    with pytest.raises(SystemExit):   # argparse's own refusal, exit code 2
-        _refused(tmp_path, "--unknown", "mass", "--prior", "mass=a")
+    assert result["settings"]["filter.priors"] == {"mass": [0.05, 0.15]}
+    for bad in ("{mass: [0.2, 0.1]}", "{mass: [0, 1]}", "{com:x: [0, 1]}", "{mass: [a, b]}",
+                "{mass: 0.1}"):
+        _refused(tmp_path, "--unknown", "mass", "--set", f"filter.priors={bad}")
 
 
 def test_identify_sim_runs_from_rendered_frames(tmp_path):
@@ -160,13 +166,13 @@ def test_identify_bad_input_is_one_clear_line(tmp_path, capsys):
                "--out", str(tmp_path), "--quiet"])
     assert rc == 2
     assert "pinky" in capsys.readouterr().err
-    rc = main(["identify", "--backend", "synthetic", "--jitter-h", "1.5", "--out",
+    rc = main(["identify", "--backend", "synthetic", "--set", "filter.jitter_h=1.5", "--out",
                str(tmp_path), "--quiet"])
     assert rc == 2
-    assert "jitter_h 1.5" in capsys.readouterr().err
+    assert "filter.jitter_h: jitter_h 1.5" in capsys.readouterr().err
     rc = main(["identify", "--backend", "nowhere", "--out", str(tmp_path), "--quiet"])
     assert rc == 2
-    assert "unknown backend 'nowhere'" in capsys.readouterr().err
+    assert "world.backend 'nowhere': unknown" in capsys.readouterr().err
     assert not (tmp_path / "result.json").exists()
 
 
@@ -187,10 +193,9 @@ def test_identify_hardware_backend_against_emulated_motors_and_sim(tmp_path):
 
 
 def test_identify_gives_up_clearly_when_the_tag_is_never_seen():
-    import pytest
-
+    from vlr.filter import FilterConfig
     from vlr.hand import GraspError
-    from vlr.identify import IdentifyConfig, identify
+    from vlr.identify import LoopConfig, identify
     from vlr.kinematics import HandModel
     from vlr.motion import ObjectParams
     from vlr.spec import load_hand, load_object
@@ -201,7 +206,7 @@ def test_identify_gives_up_clearly_when_the_tag_is_never_seen():
     world = SyntheticWorld(model, obj, SyntheticConfig(seed=0))
     with pytest.raises(GraspError, match="not seen in 30 frames"):
         identify(world, lambda: None, model, obj, nominal_grasp(model, obj, SyntheticConfig()),
-                 IdentifyConfig())
+                 FilterConfig(particles=100), LoopConfig())
 
 
 def test_identify_shows_each_unknown_in_its_unit():
@@ -210,7 +215,8 @@ def test_identify_shows_each_unknown_in_its_unit():
 
     unknowns = {"mass": Estimate(0.068, 0.025, 0.098, 0.070),
                 "length:left.proximal": Estimate(0.04, 0.031, 0.05, 0.041),
-                "noise": Estimate(0.5, 0.25, 1.0, 0.5)}
+                "tendon": Estimate(18000.0, 15000.0, 21600.0, 18100.0),
+                "curvature": Estimate(22.0, 12.0, 31.0, 21.5)}
     result = type("R", (), {"grasp_lost_at": None, "theta": {}, "unknowns": unknowns})()
     summary = {"converged": False, "iterations": 0, "converged_at": None,
                "timing": {"filter_s_per_iteration_median": 0.1}}
@@ -218,25 +224,39 @@ def test_identify_shows_each_unknown_in_its_unit():
     assert any(line.startswith("mass") and line.endswith("[25 .. 98] g") for line in lines)
     assert any(line.startswith("length:left.proximal") and "(median 41)" in line
                and line.endswith(" mm") for line in lines)
-    assert any(line.startswith("noise") and line.endswith("[0.25 .. 1]") for line in lines)
+    assert any(line.startswith("tendon") and "(median 18.1)" in line
+               and line.endswith("[15 .. 21.6] N/mm") for line in lines)
+    assert any(line.startswith("curvature") and line.endswith("[12 .. 31] 1/m")
+               for line in lines)
 
 
 def test_identify_says_the_likelihood_and_the_contact_prior_in_effect():
     from vlr.commands.identify import format_table
+    from vlr.settings import load_settings
 
     result = type("R", (), {"grasp_lost_at": None, "theta": {}, "unknowns": {}})()
-    summary = {"converged": False, "iterations": 0, "converged_at": None,
-               "timing": {"filter_s_per_iteration_median": 0.1}, "sigma": [0.2, 0.4],
-               "sigma_turn_deg": 1.0}
-    assert "likelihood: 0.2 mm / 0.4 deg + a 1 deg turn" in format_table(result, summary, None)
-    summary["sigma_turn_deg"] = 0.0
-    assert format_table(result, summary, None).endswith("likelihood: 0.2 mm / 0.4 deg")
-    summary["limit_stiffness"] = 17.0
-    assert format_table(result, summary, None).endswith("joint stops: 17 N m/rad")
-    summary["grasp_guess"] = {"contact_prior": "surface", "contact_spread_deg": 8.594}
-    assert format_table(result, summary, None).endswith(
-        "contact prior: surface (where the pads would touch the object's surface), 8.6 deg "
-        "spread")
+
+    def table(backend: str, **dotted) -> list[str]:
+        settings = load_settings({"world.backend": backend},
+                                 {k.replace("__", "."): v for k, v in dotted.items()})
+        summary = {"converged": False, "iterations": 0, "converged_at": None,
+                   "timing": {"filter_s_per_iteration_median": 0.1},
+                   "settings": settings.flat()}
+        return format_table(result, summary, None).splitlines()
+
+    sim = table("sim")
+    assert "likelihood: 0.2 mm / 0.4 deg + a 1 deg turn in the grip" in sim
+    assert ("contacts: rolling; joint stops 17 N m/rad; contact prior surface, 8.6 deg spread"
+            in sim)
+    assert not any(line.startswith("tensions") for line in sim)
+    synthetic = table("synthetic")
+    assert "likelihood: 0.1 mm / 0.4 deg" in synthetic
+    assert ("contacts: pinned; joint stops 100 N m/rad; contact prior pad, 8.6 deg spread"
+            in synthetic)
+    tensions = table("sim", filter__observation__sigma_tension_n=0.5,
+                     world__options__tension_noise_n=0.25)
+    assert "tensions weighed at 0.5 N (the sim's readings 0.25 N noisy)" in tensions
+    assert "tensions weighed at 0.5 N" in table("sim", filter__observation__sigma_tension_n=0.5)
 
 
 def test_every_identify_option_is_documented():
@@ -259,8 +279,8 @@ def test_every_identify_option_is_documented():
 
 def test_identify_says_when_the_grasp_prior_missed_the_truth(tmp_path, capsys):
     # The synthetic toy block grasps with its thumb's distal joint near 64 degrees; the sim's
-    # guess (-10, 15) with the synthetic world's 3-degree spread starts 50 degrees off it
-    # (RESULTS.md 5, session 35). Scored against the truth, the run says so.
+    # guess (-10, 15) with the synthetic world's 3-degree spread starts 50 degrees off it.
+    # Scored against the truth, the run says so.
     common = ["identify", "--backend", "synthetic", "--object", "toy_block", "--hand",
               "modelo_thumb45", "--particles", "1000", "--max-iterations", "1", "--seed", "0"]
     assert main(common + ["--out", str(tmp_path / "own")]) == 0
@@ -268,7 +288,7 @@ def test_identify_says_when_the_grasp_prior_missed_the_truth(tmp_path, capsys):
     assert own["prior_coverage"] == 1.0
     assert "missed the grasp" not in capsys.readouterr().out
     assert main(common + ["--out", str(tmp_path / "off"),
-                          "--nominal-theta-deg", "-10", "15"]) == 0
+                          "--set", "filter.guess_theta_deg=[-10, 15]"]) == 0
     off = json.loads((tmp_path / "off" / "result.json").read_text())
     assert off["prior_coverage"] <= 0.5
     assert "missed the grasp" in capsys.readouterr().out

@@ -1,11 +1,11 @@
-"""The Cramér-Rao floor of the filter's intervals (`vlr.information`, `vlr crb`; issue #5).
+"""The Cramér-Rao floor of the filter's intervals (`vlr.information`, `vlr crb`).
 
 The synthetic world (the filter's own model, pinned contacts) checks the machinery: the
 central differences are the model's derivatives, information only grows, narrower scales
 give a narrower floor. The sim checks the finding of docs/RESULTS.md 5 ("What limits the
-intervals"): on the apple, seed 0, the floor after the paper's 15 random actions is 4.6
-degrees at the likelihood's scales (0.35 mm, 0.7 degree) and 0.95 at the camera's (0.05 mm,
-0.2 degree), the criterion being 2 degrees.
+intervals"): on the apple, seed 0, the floor after the paper's 15 random actions is about
+5 degrees at the sim's likelihood (0.2 mm, 0.4 degree and a 1-degree turn) and about 1 at
+the camera's scales (0.05 mm, 0.2 degree), the criterion (docs/METHOD.md 3) being 2 degrees.
 """
 
 import json
@@ -19,16 +19,22 @@ from vlr.errors import UserError
 from vlr.filter import ParticleFilter
 from vlr.information import InformationTrace, truth_vector
 from vlr.motion import ParticleState
+from vlr.settings import load_settings
 from vlr.synthetic import random_action
-from vlr.trial import TrialSettings, identify_config, open_world
+from vlr.world import open_world
+
+
+def _settings(backend: str, **dotted):
+    return load_settings({"world.backend": backend},
+                         {k.replace("__", "."): v for k, v in dotted.items()})
 
 
 @pytest.fixture(scope="module")
 def synthetic_trace():
-    ts = TrialSettings(backend="synthetic", seed=0, particles=100,
-                       unknowns=("stiffness:thumb.distal",))
+    ts = _settings("synthetic", seed=0, filter__particles=100,
+                   filter__unknowns=["stiffness:thumb.distal"])
     world = open_world(ts)
-    pf = ParticleFilter(world.model, world.obj, identify_config(ts, world.model).filter)
+    pf = ParticleFilter(world.model, world.obj, ts.filter, ts.seed)
     u = np.asarray(world.world.grasp(), float)
     truth = world.truth()
     x0 = truth_vector(pf, truth)
@@ -115,15 +121,16 @@ def test_tension_observations_only_narrow_the_floor(synthetic_trace):
 
 
 def test_apple_floor_is_above_the_criterion_at_the_likelihoods_scales():
-    rep = crb_report(CrbSettings(trial=TrialSettings(backend="sim", object="apple", seed=0,
-                                                     max_iterations=15)))
+    rep = crb_report(CrbSettings(trial=_settings("sim", world__object="apple", seed=0,
+                                                 filter__particles=1000,
+                                                 loop__max_iterations=15)))
     at = {r["actions"]: r for r in rep["by_action"]}
     assert rep["grasp_lost_at"] is None and len(rep["by_action"]) == 16
-    # At the sim's default likelihood (0.2 mm / 0.4 deg + a 1.0-deg turn since session 17): 5.20 and
-    # 0.96 degrees with the model's stops at 17 N m/rad (the sim's default since session 28; 5.18
-    # and 0.95 at 100; the same at the sim's 0.1 s ramp of session 30), scales 0.31x (4.64 and 0.95,
-    # 0.35x, at the earlier 0.35 / 0.7); the model's information, not the particle count, keeps the
-    # likelihood's floor above 2 degrees (docs/RESULTS.md 5).
+    # At the sim's defaults (0.2 mm / 0.4 deg + a 1.0-deg turn, the model's stops at 17 N m/rad,
+    # commands ramped over 0.1 s): 5.20 and 0.96 degrees, scales 0.31x (5.18 and 0.95 with the
+    # stops at 100; 4.64 and 0.95, 0.35x, at 0.35 mm / 0.7 deg without the turn); the model's
+    # information, not the particle count, keeps the likelihood's floor above 2 degrees
+    # (docs/RESULTS.md 5).
     assert 3.5 < at[15]["mean_width_deg"] < 6.0
     assert at[15]["mean_width_deg_camera"] < 1.5
     assert at[15]["mean_width_deg"] < 0.5 * at[1]["mean_width_deg"]
@@ -154,8 +161,8 @@ def test_crb_sweep_skips_a_trial_it_cannot_linearise(tmp_path, capsys, monkeypat
 
     sweep = tmp_path / "s.yaml"
     sweep.write_text(f"name: two\nout: {tmp_path / 'runs'}\nseeds: 0-1\n"
-                     "settings: {backend: synthetic, "
-                     "max_iterations: 2}\ncases:\n  - {name: known hand}\n")
+                     "settings: {world.backend: synthetic, "
+                     "loop.max_iterations: 2}\ncases:\n  - {name: known hand}\n")
     real = sim.crb.crb_report
 
     def flaky(s):
@@ -181,7 +188,7 @@ def test_crb_cli_bad_json_folder(tmp_path, capsys):
 
 def test_crb_needs_a_world_with_truth():
     with pytest.raises(UserError, match="hardware"):
-        CrbSettings(trial=TrialSettings(backend="hardware"))
+        CrbSettings(trial=_settings("hardware"))
 
 
 def test_a_failed_step_leaves_a_one_sided_difference(synthetic_trace):
@@ -214,13 +221,14 @@ def test_the_scales_that_meet_the_criterion_are_found_or_said_to_be_none():
 def test_replaying_a_trials_actions_gives_its_floor(tmp_path, capsys):
     """`vlr crb --replay`: the commands a trial recorded, replayed, are the seed's own random
     actions, so the floor is the one `vlr crb` finds for that seed."""
-    from vlr.trial import run_trial
+    from vlr.run import run_identification
 
-    ts = TrialSettings(backend="synthetic", seed=3, particles=300, max_iterations=3)
-    result = run_trial(ts)
+    ts = _settings("synthetic", seed=3, filter__particles=300, loop__max_iterations=3)
+    result = dict(run_identification(ts).summary)
     assert len(result["commands_mm_by_iteration"]) == 4
     record = tmp_path / "trial.json"
-    record.write_text(json.dumps({"case": "synthetic", "settings": ts.to_dict(),
+    flat_settings = result.pop("settings")
+    record.write_text(json.dumps({"case": "synthetic", "settings": flat_settings,
                                   "result": result}))
     out = tmp_path / "crb.json"
     assert main(["crb", "--replay", str(record), "--json", str(out)]) == 0
@@ -231,7 +239,7 @@ def test_replaying_a_trials_actions_gives_its_floor(tmp_path, capsys):
             == pytest.approx([r["mean_width_deg"] for r in direct["by_action"]], rel=1e-6))
     # `vlr identify --out`'s result.json has its settings and commands at the top level.
     flat = tmp_path / "result.json"
-    flat.write_text(json.dumps(result))
+    flat.write_text(json.dumps({**result, "settings": flat_settings}))
     assert main(["crb", "--replay", str(flat), "--json", str(out)]) == 0
     assert ([r["mean_width_deg"] for r in json.loads(out.read_text())["by_action"]]
             == pytest.approx([r["mean_width_deg"] for r in direct["by_action"]], rel=1e-6))
@@ -253,40 +261,32 @@ def test_replaying_a_trials_actions_gives_its_floor(tmp_path, capsys):
     assert "commands" in capsys.readouterr().err
 
 
-def test_a_replay_keeps_the_joint_stops_its_trial_ran_with():
-    """The sim's default stops changed from 100 to 17 N m/rad in session 28: a record that
-    leaves them unset replays at what its result says it ran with, or at 100 before that."""
+def test_a_replay_runs_with_every_setting_its_trial_recorded():
+    """A record's settings are the flat tree the trial ran (`Settings.flat()`): the replay
+    loads them back whole, the joint stops and the sim's ramp as they were, and names a
+    setting that does not load."""
     from sim.crb import replay_commands
 
-    settings = TrialSettings(backend="sim", seed=1).to_dict()
+    ran = _settings("sim", seed=1, filter__motion__limit_stiffness=40.0,
+                    world__options__ramp_time=0.05)
     cmds = [[1.0, 2.0, 3.0], [1.1, 2.0, 3.0]]
-    old = {"settings": settings, "result": {"commands_mm_by_iteration": cmds}}
-    assert replay_commands(old, "old")[0].limit_stiffness == 100.0
-    new = {"settings": settings, "result": {"commands_mm_by_iteration": cmds,
-                                            "limit_stiffness": 17.0}}
-    assert replay_commands(new, "new")[0].limit_stiffness == 17.0
-    pinned = {"settings": {**settings, "limit_stiffness": 40.0},
-              "result": {"commands_mm_by_iteration": cmds, "limit_stiffness": 40.0}}
-    assert replay_commands(pinned, "pinned")[0].limit_stiffness == 40.0
-    garbled = {"settings": settings, "result": {"commands_mm_by_iteration": cmds,
-                                                "limit_stiffness": "soft"}}
-    with pytest.raises(UserError, match="'soft'"):
-        replay_commands(garbled, "garbled")
-
-
-def test_a_replay_keeps_the_sims_ramp_its_trial_ran_with():
-    """The sim's trials ramp each command change over 0.1 s since session 30, 50 ms before:
-    a record that leaves it unset replays at what its result says, or at 0.05."""
-    from sim.crb import replay_commands
-
-    settings = TrialSettings(backend="sim", seed=1).to_dict()
-    cmds = [[1.0, 2.0, 3.0], [1.1, 2.0, 3.0]]
-    old = {"settings": settings, "result": {"commands_mm_by_iteration": cmds}}
-    assert replay_commands(old, "old")[0].ramp_time_in_effect == 0.05
-    new = {"settings": settings, "result": {"commands_mm_by_iteration": cmds,
-                                            "ramp_time": 0.1}}
-    assert replay_commands(new, "new")[0].ramp_time_in_effect == 0.1
-    garbled = {"settings": settings, "result": {"commands_mm_by_iteration": cmds,
-                                                "ramp_time": "slow"}}
-    with pytest.raises(UserError, match="'slow'"):
-        replay_commands(garbled, "garbled")
+    record = {"settings": ran.flat(), "result": {"commands_mm_by_iteration": cmds}}
+    trial, u = replay_commands(record, "pinned")
+    assert trial == ran
+    assert trial.filter.motion.limit_stiffness == 40.0
+    assert trial.world.options["ramp_time"] == 0.05
+    np.testing.assert_allclose(u, np.asarray(cmds) * 1e-3, rtol=1e-12)
+    # a record of today's defaults replays at them
+    default = {"settings": _settings("sim", seed=1).flat(),
+               "result": {"commands_mm_by_iteration": cmds}}
+    assert replay_commands(default, "default")[0].filter.motion.limit_stiffness == 17.0
+    for key, value in (("filter.motion.limit_stiffness", "soft"),
+                       ("world.options.ramp_time", "slow")):
+        garbled = {**record, "settings": {**record["settings"], key: value}}
+        with pytest.raises(UserError, match=f"garbled: {key}: '{value}'"):
+            replay_commands(garbled, "garbled")
+    # a record of the settings before the tree (flat names) is named, not guessed at
+    old = {"settings": {"backend": "sim", "seed": 1, "limit_stiffness": 40.0},
+           "result": {"commands_mm_by_iteration": cmds}}
+    with pytest.raises(UserError, match="old: unknown setting 'backend'"):
+        replay_commands(old, "old")

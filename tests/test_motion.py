@@ -14,6 +14,7 @@ from vlr.motion import (
     MotionConfig,
     MotionModel,
     ObjectParams,
+    PadFriction,
     ParticleState,
     reference_energy,
     rotvec_to_matrix,
@@ -22,9 +23,9 @@ from vlr.spec import load_hand
 from vlr.surface import LocalSurface
 
 OBJ = ObjectParams(mass=0.12, com=(0.0, 0.0, 0.03))
-# The pinned-contact model (Eq. 8 as a penalty), without rolling.
-PIN = MotionConfig()
-ROLL = MotionConfig().with_rolling()
+# The pinned-contact model (Eq. 8 as a penalty), and the rolling one (the default).
+PIN = MotionConfig(rolling=False)
+ROLL = MotionConfig()
 THETA0 = (-0.3, 1.2)
 
 
@@ -35,7 +36,9 @@ def modelo() -> HandModel:
 
 def grasp(model: HandModel, n: int = 1, tension: float = 5.0, theta=THETA0,
           config: MotionConfig | None = None, stiffness=None):
-    """Settled grasp of n identical particles at u_0 = s(theta) + T/k_t."""
+    """Settled grasp of n identical particles at u_0 = s(theta) + T/k_t, by default with
+    pinned contacts."""
+    config = config or PIN
     nf = model.n_fingers
     th = np.tile(np.asarray(theta, dtype=float), (nf, 1))
     normals = normals_from_angles(np.zeros(nf), np.zeros(nf))
@@ -46,8 +49,7 @@ def grasp(model: HandModel, n: int = 1, tension: float = 5.0, theta=THETA0,
     st.anchor_to_pose(model)
     u0 = model.tendon_takeup(th) + tension / model.tendon_stiffness
     mm = MotionModel(model, OBJ, config)
-    settle = MotionConfig(**{**(config or MotionConfig()).__dict__, "max_iter": 500,
-                             "jump_theta": math.pi, "jump_pos": 1.0})
+    settle = replace(config, max_iter=500, jump_theta=math.pi, jump_pos=1.0)
     status, _ = mm.solve(st, u0, settle)
     assert status[0] == 0
     return mm, st.take(np.zeros(n, dtype=int)), u0
@@ -93,29 +95,29 @@ def test_gradient_and_hessian_match_reference(modelo):
     check_derivatives(mm, st, u0)
 
 
-@pytest.mark.parametrize("surface, exact", [
-    (LocalSurface("sphere", 0.04), False), (LocalSurface("plane"), False),
-    # The cylinder held to its axis; along z one contact of the test grasp is on an end face.
-    (LocalSurface("cylinder", 0.016, (1.0, 0.0, 0.0)), True),
-    (LocalSurface("cylinder", 0.016, (0.0, 0.0, 1.0)), True),
-    (LocalSurface("cylinder", 0.016, (0.6, 0.8, 0.0)), True)])
-def test_rolling_gradient_and_hessian_match_reference(modelo, surface, exact):
-    """The rolling term (pad sphere on the object's local sphere or cylinder, no tangential
-    slip of the previous contacts) against finite differences of its NumPy reference; for the
-    cylinder that includes the Hessian terms of its axis turning with the object."""
+@pytest.mark.parametrize("surface", [
+    LocalSurface("sphere", 0.04), LocalSurface("plane"),
+    # A cylinder's side is held to a sphere of its radius; along z one contact of the test
+    # grasp is on an end face.
+    LocalSurface("cylinder", 0.016, (1.0, 0.0, 0.0)),
+    LocalSurface("cylinder", 0.016, (0.0, 0.0, 1.0)),
+    LocalSurface("cylinder", 0.016, (0.6, 0.8, 0.0))])
+def test_rolling_gradient_and_hessian_match_reference(modelo, surface):
+    """The rolling term (pad sphere on the object's local sphere, no tangential slip of the
+    previous contacts) against finite differences of its NumPy reference."""
     obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=surface)
     _, st, u0 = grasp(modelo)
-    mm = MotionModel(modelo, obj, replace(ROLL, exact_cylinder=exact))
+    mm = MotionModel(modelo, obj, ROLL)
     roll = mm.rolling_frames(st)[0]
-    assert np.count_nonzero(roll[:, kern.RL_AXIS:kern.RL_AXIS + 3].any(axis=1)) == (
-        0 if not exact else 2 if surface.axis[2] else 3)
+    assert roll.shape == (3, kern.N_RL)
+    np.testing.assert_allclose(roll[:, kern.RL_RHO], surface.kernel_radius)
     shake(st, 3, 0.02, 0.02, 2e-4)
     check_derivatives(mm, st, u0, roll, e_rel=1e-10, hess_atol=2e-6)
 
 
 def test_equilibrium_is_stationary_and_matches_scipy(modelo):
     # A soft contact penalty keeps the plain reference minimiser well conditioned.
-    cfg = MotionConfig(terms=PIN.terms, contact_stiffness=1e4)
+    cfg = replace(PIN, contact_stiffness=1e4)
     mm, st, u0 = grasp(modelo, n=3, config=cfg)
     rng = np.random.default_rng(2)
     u = u0 + rng.uniform(-3e-4, 3e-4, (3,))
@@ -138,7 +140,7 @@ def test_equilibrium_is_stationary_and_matches_scipy(modelo):
 
 
 def test_stiffness_changes_equilibrium(modelo):
-    # Observability (METHOD.md 8.2): with series tendon compliance, spring rates matter.
+    # Observability (docs/METHOD.md 8.2): with series tendon compliance, spring rates matter.
     _, a, u0 = grasp(modelo)
     stiff = np.array(modelo.stiffness)
     stiff[0, 1] *= 2.0
@@ -169,30 +171,6 @@ def test_failed_solve_is_flagged_not_nan(modelo):
     assert np.isneginf(ll[1]) and np.isneginf(ll[2]) and np.isfinite(ll[0])
 
 
-def test_model_error_that_grows_with_the_motion(modelo):
-    """kappa > 0: a particle that predicts a large motion is judged with a wider scale. With
-    the same 2 mm error it is more likely than one that predicted no motion; with no error
-    it is less likely (the likelihood keeps its normalisation, so a wide tolerance is not
-    free). kappa = 0 ignores the motion."""
-    from vlr.observation import ObservationModel, PomObservation
-
-    _, st, _ = grasp(modelo, n=2)
-    st.pos[1] = st.pos[0]
-    st.rot[1] = st.rot[0]
-    moved = (np.array([0.0, 0.02]), np.array([0.0, 0.3]))        # 20 mm, 17 degrees
-    model = ObservationModel(motion_fraction=0.1)
-    far = PomObservation(st.pos[0] + np.array([0.002, 0.0, 0.0]), st.rot[0])
-    near = PomObservation(st.pos[0], st.rot[0])
-    ll_far = model.log_likelihood(st, far, moved)
-    ll_near = model.log_likelihood(st, near, moved)
-    assert ll_far[1] > ll_far[0] and ll_near[1] < ll_near[0]
-    fixed = ObservationModel().log_likelihood(st, far, moved)
-    assert fixed[0] == pytest.approx(fixed[1])
-    assert ll_far[0] == pytest.approx(fixed[0])      # no motion: the fixed scales
-    with pytest.raises(ValueError, match="motion_fraction -0.1"):
-        ObservationModel(motion_fraction=-0.1)
-
-
 def test_three_joint_two_finger_pinch():
     ch = Chain(lengths=(0.04, 0.03), pad_center=(0.0, 0.003, 0.025), pad_radius=0.01,
                pulley_radii=(0.008, 0.006, 0.005), stiffness=(0.04, 0.03, 0.02),
@@ -210,11 +188,12 @@ def test_three_joint_two_finger_pinch():
 
 
 def test_rolling_spin_gradient_matches_reference(modelo):
-    """The pad's torsional stiffness (spin about the contact normal): exact energy and
-    gradient (its Hessian is Gauss-Newton, so only the solver's speed depends on it)."""
+    """The pad's torsional stiffness (spin about the contact normal, `PadFriction`): exact
+    energy and gradient (its Hessian is Gauss-Newton, so only the solver's speed depends on
+    it)."""
     obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
     _, st, u0 = grasp(modelo)
-    mm = MotionModel(modelo, obj, replace(ROLL, spin_stiffness=0.05))
+    mm = MotionModel(modelo, obj, ROLL, friction=PadFriction(spin_stiffness=0.05))
     roll = mm.rolling_frames(st)[0]
     shake(st, 4, 0.03, 0.05)
     e = check_derivatives(mm, st, u0, roll, e_rel=1e-10, hess_atol=None)
@@ -238,7 +217,8 @@ def test_reanchoring_keeps_the_grasp_force(modelo):
     assert np.degrees(np.abs(zeroed.theta - theta0).max()) > 0.003  # it relaxes
 
 
-FRICTION = replace(ROLL, slide_friction=1.0, spin_friction=0.001)
+# The sim's pads' friction (`sim.pads`): sliding mu 1, torsional mu_t 1 mm.
+FRICTION = PadFriction(slide=1.0, spin=0.001)
 
 
 def _cone_load(mm: MotionModel, st: ParticleState) -> np.ndarray:
@@ -251,7 +231,7 @@ def _cone_load(mm: MotionModel, st: ParticleState) -> np.ndarray:
     t = np.linalg.norm(d - np.sum(d * m, axis=-1, keepdims=True) * m, axis=-1)
     roll = mm.rolling_frames(st, m)
     n = mm.normal_forces(st, roll)
-    return mm.config.contact_stiffness * t / (mm.config.slide_friction * np.maximum(n, 1e-12))
+    return mm.config.contact_stiffness * t / (mm.friction.slide * np.maximum(n, 1e-12))
 
 
 def test_friction_gradient_matches_reference(modelo):
@@ -261,7 +241,7 @@ def test_friction_gradient_matches_reference(modelo):
     sticking and the others slipping (the Hessian is Gauss-Newton)."""
     obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
     _, st, u0 = grasp(modelo)
-    mm = MotionModel(modelo, obj, FRICTION)
+    mm = MotionModel(modelo, obj, ROLL, friction=FRICTION)
     roll = mm.rolling_frames(st)[0]
     shake(st, 5, 0.03, 0.05, 5e-4)
     # The stretches carry 1.2-2.0 kN: the first contact's cone (5 kN) holds it, the others'
@@ -269,7 +249,7 @@ def test_friction_gradient_matches_reference(modelo):
     roll[:, kern.RL_FORCE] = (5000.0, 0.05, 0.02)
     d = st.contacts(modelo)[0] - (st.pos[0] + st.anchors[0] @ st.rot[0].T)
     n = roll[:, 3:6]
-    load = FRICTION.contact_stiffness * np.linalg.norm(
+    load = ROLL.contact_stiffness * np.linalg.norm(
         d - np.sum(d * n, axis=-1, keepdims=True) * n, axis=-1) / roll[:, kern.RL_FORCE]
     assert load[0] < 1.0 and np.all(load[1:] > 1.0)
     e = check_derivatives(mm, st, u0, roll, e_rel=1e-10, hess_atol=None)
@@ -284,16 +264,15 @@ def test_friction_keeps_every_contact_inside_its_cone(modelo):
     this test hand's grasps under gravity hang on their glued contacts, which friction
     rightly refuses."""
     obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
-    glued = replace(ROLL, gravity=(0.0, 0.0, 0.0))
-    friction = replace(FRICTION, gravity=(0.0, 0.0, 0.0))
-    _, st, u0 = grasp(modelo, config=glued, theta=(0.3, 0.3))
+    weightless = replace(ROLL, gravity=(0.0, 0.0, 0.0))
+    _, st, u0 = grasp(modelo, config=weightless, theta=(0.3, 0.3))
     du = np.array([6e-4, -4e-4, 0.0])
     loads = {}
-    for name, cfg in (("friction", friction), ("glued", glued)):
+    for name, friction in (("friction", FRICTION), ("glued", None)):
         s = st.copy()
-        status, _ = MotionModel(modelo, obj, cfg).solve(s, u0 + du, u_from=u0)
+        status, _ = MotionModel(modelo, obj, weightless, friction).solve(s, u0 + du, u_from=u0)
         assert np.all(status == 0), name
-        loads[name] = _cone_load(MotionModel(modelo, obj, friction), s)
+        loads[name] = _cone_load(MotionModel(modelo, obj, weightless, FRICTION), s)
     assert loads["friction"].max() <= 1.0 + 1e-3
     assert loads["glued"].max() > 10.0
 
@@ -303,161 +282,51 @@ def test_a_settle_has_no_friction(modelo):
     obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
     _, st, u0 = grasp(modelo, config=ROLL)
     a, b = st.copy(), st.copy()
-    MotionModel(modelo, obj, FRICTION).solve(a, u0 + 2e-4)
+    MotionModel(modelo, obj, ROLL, FRICTION).solve(a, u0 + 2e-4)
     MotionModel(modelo, obj, ROLL).solve(b, u0 + 2e-4)
     np.testing.assert_array_equal(a.theta, b.theta)
     np.testing.assert_array_equal(a.anchors, b.anchors)
 
 
-def test_a_stored_spin_torque_matches_reference(modelo):
-    """`MotionConfig.spin_memory`: a pad's stored spin torque offsets its torsional friction
-    curve (f'(0) is the stored torque): the kernel against the NumPy reference, with one
-    pad inside its cone, one near its edge and one beyond (held at the clip)."""
-    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
-    _, st, u0 = grasp(modelo)
-    mm = MotionModel(modelo, obj, replace(FRICTION, spin_memory=True))
-    roll = mm.rolling_frames(st)[0]
-    shake(st, 6, 5e-4, 5e-4, 1e-5)  # spins of about the smoothing, where the offset shows
-    roll[:, kern.RL_FORCE] = (2.0, 1.0, 0.5)
-    roll[:, kern.RL_SPIN_TORQUE] = (0.5e-3, -0.98e-3, 2e-3)  # N m; cones 2, 1, 0.5 mN m
-    check_derivatives(mm, st, u0, roll, e_rel=1e-10, hess_atol=None)
-    g = mm.evaluate(st, 0, u0, roll)[1]
-    roll[:, kern.RL_SPIN_TORQUE] = 0.0
-    # The stored torques (0.5-1 mN m) show in the gradient's rotational part.
-    assert np.abs(g - mm.evaluate(st, 0, u0, roll)[1])[6:].max() > 2e-4
+@pytest.mark.parametrize("kw, message", [
+    (dict(slide=0.0), "slide friction"), (dict(slide=-1.0), "slide friction"),
+    (dict(spin=-1e-3), "spin friction"), (dict(spin=math.inf), "spin friction"),
+    (dict(spin_stiffness=-1.0), "spin stiffness"), (dict(spin_smoothing=0.0), "spin smoothing")])
+def test_bad_friction_settings_are_named(kw, message):
+    with pytest.raises(ValueError, match=message):
+        PadFriction(**kw)
+    assert not PadFriction().on and PadFriction(slide=1.0).on and PadFriction(spin=1e-3).on
 
 
-def test_spin_memory_makes_the_frictional_state_a_fixed_point(modelo):
-    """Solved again and again at the command an action ended at, a grasp with spin memory
-    stops moving after the first solve (which re-settles the pads' re-contact); without
-    memory every solve drops the pads' spin torques again and the grasp keeps moving. Each
-    stored torque lies inside its cone mu_t N."""
-    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
-    weightless = dict(gravity=(0.0, 0.0, 0.0))
-    _, st, u0 = grasp(modelo, config=replace(ROLL, **weightless), theta=(0.3, 0.3))
-    u1 = u0 + np.array([6e-4, -4e-4, 0.0])
-    moved = {}
-    for memory in (True, False):
-        mm = MotionModel(modelo, obj, replace(FRICTION, spin_memory=memory, **weightless))
-        s = st.copy()
-        assert np.all(mm.solve(s, u1, u_from=u0)[0] == 0)
-        if memory:
-            cone = FRICTION.spin_friction * mm.normal_forces(s, mm.rolling_frames(s))
-            assert np.abs(s.spin_torque).max() > 1e-5  # the pads hold torques
-            assert np.all(np.abs(s.spin_torque) <= cone + 1e-12)
-        else:
-            assert not s.spin_torque.any()
-        assert np.all(mm.solve(s, u1, u_from=u1)[0] == 0)
-        before = s.theta.copy()
-        assert np.all(mm.solve(s, u1, u_from=u1)[0] == 0)
-        moved[memory] = np.degrees(np.abs(s.theta - before).max())
-    assert moved[True] < 0.002 < 0.005 < moved[False], moved
-
-
-def test_a_settle_zeroes_the_stored_spin_torques(modelo):
-    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
-    _, st, u0 = grasp(modelo, config=ROLL)
-    mm = MotionModel(modelo, obj, replace(FRICTION, spin_memory=True))
-    st.spin_torque[:] = 1e-4
-    mm.solve(st, u0)
-    assert not st.spin_torque.any()
-
-
-@pytest.mark.parametrize("kw", [dict(slide_friction=0.0), dict(slide_friction=-1.0),
-                                dict(spin_friction=-1e-3), dict(spin_smoothing=0.0)])
-def test_bad_friction_settings_are_named(kw):
-    with pytest.raises(ValueError, match=next(iter(kw))):
+@pytest.mark.parametrize("kw, message", [
+    (dict(terms=("springs", "rolling")), "rolling contacts: rolling=True"),
+    (dict(terms=("springs", "tendon")), "needs 'contacts'"),
+    (dict(rolling_substeps=0), "rolling_substeps"), (dict(follow_substeps=-1), "follow_substeps"),
+    (dict(limit_stiffness=0.0), "limit_stiffness"), (dict(max_iter=0), "max_iter")])
+def test_bad_motion_settings_are_named(kw, message):
+    with pytest.raises(ValueError, match=message):
         MotionConfig(**kw)
+    MotionConfig(terms=("springs", "tendon"), rolling=False)   # pinned needs no contacts
 
 
-def test_cone_return_moves_the_glued_grasp_towards_the_frictional_one(modelo):
-    """`MotionConfig.cone_return`: the glued solve, then each contact's stretch returned onto
-    its cone and a glued settle. The settle loads the contacts again, less: one step lowers
-    the worst contact's load (tangential force over mu N; 59 glued, 28 after the step when
-    written) and moves the object part of the way to the frictional solve's place (about a
-    third). A settle (no `u_from`) is unchanged."""
-    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
-    glued = replace(ROLL, gravity=(0.0, 0.0, 0.0))
-    cone = replace(glued, cone_return=FRICTION.slide_friction)
-    friction = replace(FRICTION, gravity=(0.0, 0.0, 0.0))
-    _, st, u0 = grasp(modelo, config=glued, theta=(0.3, 0.3))
-    du = np.array([6e-4, -4e-4, 0.0])
-    gauge = MotionModel(modelo, obj, friction)
-    out = {}
-    for name, cfg in (("cone", cone), ("glued", glued), ("friction", friction)):
-        s = st.copy()
-        status, _ = MotionModel(modelo, obj, cfg).solve(s, u0 + du, u_from=u0)
-        assert np.all(status == 0), name
-        out[name] = (_cone_load(gauge, s).max(), s.pos[0].copy())
-    assert out["glued"][0] > 10.0 and out["cone"][0] < 0.6 * out["glued"][0]
-    to_friction = {k: np.linalg.norm(out[k][1] - out["friction"][1]) for k in ("cone", "glued")}
-    assert to_friction["cone"] < 0.85 * to_friction["glued"], to_friction
-    a, b = st.copy(), st.copy()
-    MotionModel(modelo, obj, cone).solve(a, u0 + 2e-4)
-    MotionModel(modelo, obj, glued).solve(b, u0 + 2e-4)
-    np.testing.assert_array_equal(a.theta, b.theta)
-    with pytest.raises(ValueError, match="cone_return"):
-        replace(ROLL, cone_return=0.0)
-
-
-def test_a_hypothesized_link_length_scales_the_links_mass_and_centre(modelo):
-    """A particle whose left finger is 40 mm long with its pad 27 mm out (NF1's make, an
-    unknown length) weighs its links like a hand built with that finger: masses and centres
-    of mass along the link scaled with the lengths (`MotionConfig.link_scaling`). Without
-    the scaling (the default) it keeps the Model O's links, and the two differ."""
-    s = np.array([40 / 62, 27 / 32])
-    left = modelo.chains[1]
-    built = replace(left, lengths=(left.lengths[0] * s[0],),
-                    pad_center=(*left.pad_center[:2], left.pad_center[2] * s[1]),
-                    link_masses=tuple(m * f for m, f in zip(left.link_masses, s, strict=True)),
-                    link_coms=tuple((c[0], c[1], c[2] * f)
-                                    for c, f in zip(left.link_coms, s, strict=True)))
-    nf1 = replace(modelo, chains=(modelo.chains[0], built, modelo.chains[2]))
-    gravity_only = MotionConfig(terms=("link_gravity",), link_scaling=True)
-    th = np.tile(np.array([-0.2, 0.9]), (3, 1))
-    normals = normals_from_angles(np.zeros(3), np.zeros(3))
-
-    def energy(model, segments, config):
-        st = ParticleState.nominal(model, 1, th, normals, np.zeros(3), np.eye(3))
-        if segments is not None:
-            st.segments[0] = segments
-        e, g, _ = MotionModel(model, OBJ, config).evaluate(st, 0, np.zeros(3))
-        return e, g
-
-    hypothesized = modelo.segments.copy()
-    hypothesized[1] *= s
-    e_built, g_built = energy(nf1, None, gravity_only)
-    e_scaled, g_scaled = energy(modelo, hypothesized, gravity_only)
-    assert e_scaled == pytest.approx(e_built, rel=1e-12)
-    np.testing.assert_allclose(g_scaled, g_built, rtol=1e-10, atol=1e-15)
-    e_fixed, _ = energy(modelo, hypothesized, replace(gravity_only, link_scaling=False))
-    assert abs(e_fixed - e_built) > 0.1 * abs(e_built - energy(modelo, None, gravity_only)[0])
-    # The NumPy reference scales alike (the kernel is tested against it).
-    mm = MotionModel(modelo, OBJ, gravity_only)
-    st = ParticleState.nominal(modelo, 1, th, normals, np.zeros(3), np.eye(3))
-    st.segments[0] = hypothesized
-    assert reference_energy(mm, st, 0, np.zeros(3), st.theta[0], st.pos[0],
-                            st.rot[0]) == pytest.approx(e_scaled, rel=1e-12)
-
-
-def test_a_per_call_config_gets_its_own_link_scaling(modelo):
-    """`solve(config=...)` weighs the links as that config says, not as the model's own."""
-    mm_off, st, u0 = grasp(modelo, config=PIN)
-    st.segments[0, 1] *= 0.9                              # the left finger's lengths
-    mm_on = MotionModel(modelo, OBJ, replace(PIN, link_scaling=True))
+def test_a_per_call_config_gets_its_own_gravity(modelo):
+    """`solve(config=...)` weighs the hand and the object as that config says, not as the
+    model's own."""
+    mm_down, st, u0 = grasp(modelo, config=PIN)
+    weightless = replace(PIN, gravity=(0.0, 0.0, 0.0))
+    mm_none = MotionModel(modelo, OBJ, weightless)
     free = dict(max_iter=500, jump_theta=math.pi, jump_pos=1.0)
-    scaled = replace(PIN, link_scaling=True, **free)
     a, b, c = st.copy(), st.copy(), st.copy()
-    assert mm_off.solve(a, u0, scaled)[0][0] == 0
-    assert mm_on.solve(b, u0, scaled)[0][0] == 0
-    assert mm_off.solve(c, u0, replace(PIN, **free))[0][0] == 0
+    assert mm_down.solve(a, u0 + 2e-4, replace(weightless, **free))[0][0] == 0
+    assert mm_none.solve(b, u0 + 2e-4, replace(weightless, **free))[0][0] == 0
+    assert mm_down.solve(c, u0 + 2e-4, replace(PIN, **free))[0][0] == 0
     np.testing.assert_array_equal(a.theta, b.theta)
     assert np.abs(a.theta - c.theta).max() > 1e-6
 
 
 def test_a_particles_own_object_mass_and_centre_of_mass_match_reference(modelo):
-    """The object's unknowns (issue #5, term (b)): each particle's own mass and centre of
-    mass in the kernel's gravity term, against finite differences of the reference."""
+    """The object's unknowns: each particle's own mass and centre of mass in the kernel's
+    gravity term, against finite differences of the reference."""
     mm, st, u0 = grasp(modelo, config=ROLL)
     st.hold_object(OBJ)
     st.object_mass[0] = 0.31
@@ -485,16 +354,16 @@ def test_a_heavier_particle_sinks_and_the_models_own_object_changes_nothing(mode
         own.put(np.array([0]), copied.take(np.array([0])))
 
 
-@pytest.mark.parametrize("surface, exact, kappa", [
-    (LocalSurface("sphere", 0.04), False, 60.0), (LocalSurface("plane"), False, 30.0),
-    (LocalSurface("cylinder", 0.016, (1.0, 0.0, 0.0)), True, 20.0)])
-def test_a_contacts_own_curvature_matches_reference(modelo, surface, exact, kappa):
-    """The curvature unknown (issue #5, term (b)): each contact's own radius of curvature in
-    the rolling frames, read by the kernel's rolling term, against finite differences of the
-    reference; a plane with a curvature is a sphere."""
+@pytest.mark.parametrize("surface, kappa", [
+    (LocalSurface("sphere", 0.04), 60.0), (LocalSurface("plane"), 30.0),
+    (LocalSurface("cylinder", 0.016, (1.0, 0.0, 0.0)), 20.0)])
+def test_a_contacts_own_curvature_matches_reference(modelo, surface, kappa):
+    """The curvature unknown: each contact's own radius of curvature in the rolling frames,
+    read by the kernel's rolling term, against finite differences of the reference; a plane
+    with a curvature is a sphere."""
     obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=surface)
     _, st, u0 = grasp(modelo)
-    mm = MotionModel(modelo, obj, replace(ROLL, exact_cylinder=exact))
+    mm = MotionModel(modelo, obj, ROLL)
     st.hold_surface(obj)
     st.surface_curvature[0, 1] = kappa
     roll = mm.rolling_frames(st)[0]

@@ -9,8 +9,13 @@ import pytest
 
 from vlr.cli import main
 from vlr.errors import UserError
+from vlr.settings import load_settings
 from vlr.sweep import Trial, expand, load_sweep, parse_seeds, run_one
-from vlr.trial import TrialSettings
+
+
+def _settings(**dotted):
+    """A settings tree from dotted keys given as keywords with '__' for '.'."""
+    return load_settings({k.replace("__", "."): v for k, v in dotted.items()})
 
 
 def test_sweep_file_expands_to_cases_times_seeds(sweep_file):
@@ -20,6 +25,14 @@ def test_sweep_file_expands_to_cases_times_seeds(sweep_file):
         ("known hand", 0), ("known hand", 1), ("stiffness", 0), ("stiffness", 1)]
     assert len({t.id for t in trials}) == 4
     assert parse_seeds("0-2,7") == (0, 1, 2, 7)
+    # the file's dotted keys, the case's on top of the common settings
+    known, stiff = trials[0].settings, trials[2].settings
+    assert (known.world.backend, known.filter.particles, known.loop.max_iterations) == (
+        "synthetic", 200, 2)
+    assert known.filter.unknowns == () and known.world.options == {"true_stiffness": {}}
+    assert stiff.filter.unknowns == ("stiffness:thumb.distal",)
+    assert stiff.world.options == {"true_stiffness": {"thumb.distal": 0.045}}
+    assert stiff.filter.particles == 200
 
 
 def test_sweep_runs_resumes_and_never_repeats_a_finished_trial(sweep_file, tmp_path, capsys):
@@ -55,19 +68,23 @@ def test_sweep_runs_resumes_and_never_repeats_a_finished_trial(sweep_file, tmp_p
 
 
 def test_same_seed_same_numbers(tmp_path):
-    t = Trial("x", TrialSettings(backend="synthetic", particles=200, max_iterations=2, seed=3))
+    t = Trial("x", _settings(world__backend="synthetic", filter__particles=200,
+                             loop__max_iterations=2, seed=3))
     a = run_one(t, tmp_path / "a")["result"]
     b = run_one(t, tmp_path / "b")["result"]
     assert a["errors"] == b["errors"] and a["estimates"] == b["estimates"]
 
 
 def test_a_failed_trial_is_recorded_and_the_sweep_goes_on(tmp_path):
-    t = Trial("bad", TrialSettings(backend="synthetic", object="no_such_object",
-                                   particles=200, max_iterations=1))
+    t = Trial("bad", _settings(world__backend="synthetic", world__object="no_such_object",
+                               filter__particles=200, loop__max_iterations=1))
     rec = run_one(t, tmp_path)
     assert rec["status"] == "error" and "no_such_object" in rec["error"]
     saved = json.loads((tmp_path / "trials" / f"{t.id}.json").read_text())
     assert saved["status"] == "error"
+    # the record keeps every setting in effect, flat and dotted
+    assert saved["settings"] == t.settings.flat()
+    assert saved["settings"]["world.object"] == "no_such_object"
 
 
 def test_a_trial_record_names_the_commit_it_ran_at(tmp_path):
@@ -75,8 +92,8 @@ def test_a_trial_record_names_the_commit_it_ran_at(tmp_path):
     name their code; outside a git checkout it is None."""
     import subprocess
 
-    t = Trial("bad", TrialSettings(backend="synthetic", object="no_such_object",
-                                   particles=200, max_iterations=1))
+    t = Trial("bad", _settings(world__backend="synthetic", world__object="no_such_object",
+                               filter__particles=200, loop__max_iterations=1))
     code = run_one(t, tmp_path)["code"]
     root = Path(__file__).resolve().parent.parent
     if not (root / ".git").exists():
@@ -94,10 +111,10 @@ def test_a_trial_record_names_the_commit_it_ran_at(tmp_path):
 
 def test_bad_sweep_files_name_the_problem(tmp_path):
     p = tmp_path / "s.yaml"
-    p.write_text("seeds: 0\nout: x\nsettings: {particlez: 10}\n")
-    with pytest.raises(UserError, match="particlez"):
+    p.write_text("seeds: 0\nout: x\nsettings: {filter.particlez: 10}\n")
+    with pytest.raises(UserError, match="filter.particlez"):
         expand(load_sweep(p))
-    p.write_text("seeds: 0\nout: x\ngird: {object: [apple]}\n")
+    p.write_text("seeds: 0\nout: x\ngird: {world.object: [apple]}\n")
     with pytest.raises(UserError, match="gird"):
         load_sweep(p)
     with pytest.raises(UserError, match="not found"):
@@ -108,15 +125,21 @@ def test_bad_sweep_files_name_the_problem(tmp_path):
     ("seeds: [a]", "seeds"), ("seeds: [1.5]", "seeds"), ("seeds: true", "seeds"),
     ("cases: 3", "cases must be a list"), ("cases: [3]", "cases must be a list"),
     ("settings: 5", "settings must be a mapping"),
-    ("grid: {object: apple}", "grid must map"), ("grid: {object: []}", "grid must map"),
+    ("grid: {world.object: apple}", "grid must map"),
+    ("grid: {world.object: []}", "grid must map"),
     ("grid: {seed: [1, 2]}", "top-level seeds"),
-    ("settings: {particles: many}", "particles 'many' must be an integer"),
-    ("settings: {max_iterations: '3'}", "max_iterations"),
-    ("settings: {sigma_pos_mm: x}", "sigma_pos_mm"),
-    ("settings: {true_stiffness: [1]}", "true_stiffness"),
-    ("settings: {nominal_theta_deg: 3}", "nominal_theta_deg"),
-    ("grid: {object: [apple, no_such_object]}", "no_such_object"),
-    ("settings: {unknowns: [stiffness:thumb.nope]}", "thumb.nope"),
+    ("settings: {filter.particles: many}", "filter.particles: 'many' is not an integer"),
+    ("settings: {filter: {particles: many}}", "filter.particles: 'many' is not an integer"),
+    ("settings: {loop.max_iterations: '3'}", "loop.max_iterations"),
+    ("settings: {filter.observation.sigma_pos_mm: x}", "filter.observation.sigma_pos_mm"),
+    ("settings: {world.backend: synthetic, world.options.true_stiffness: [1]}",
+     "world.options.true_stiffness"),
+    ("settings: {filter.guess_theta_deg: 3}", "filter.guess_theta_deg"),
+    ("settings: {particles: 200}", "unknown setting 'particles'"),
+    ("cases: [{name: a, filter.jitter_h: 1.5}]", "case 'a': filter.jitter_h"),
+    ("grid: {filter.jitter_h: [0.2, wide]}", "filter.jitter_h: 'wide'"),
+    ("grid: {world.object: [apple, no_such_object]}", "no_such_object"),
+    ("settings: {filter.unknowns: [stiffness:thumb.nope]}", "thumb.nope"),
 ])
 def test_bad_types_in_a_sweep_file_are_one_user_error(tmp_path, text, match):
     p = tmp_path / "s.yaml"
@@ -159,11 +182,9 @@ def test_records_are_strict_json(tmp_path):
 
 
 def test_a_trial_with_a_spec_file_path_has_a_flat_file_name():
-    from vlr.sweep import Trial, TrialSettings
-
-    named = Trial("c", TrialSettings(hand="modelo", object="apple", seed=3))
-    assert named.id.startswith("c_apple_modelo_s3_")  # names keep the ids of old sweeps
-    path = Trial("c", TrialSettings(hand="/tmp/hands/my hand.yaml", object="apple"))
+    named = Trial("c", _settings(world__hand="modelo", world__object="apple", seed=3))
+    assert named.id.startswith("c_apple_modelo_s3_")
+    path = Trial("c", _settings(world__hand="/tmp/hands/my hand.yaml", world__object="apple"))
     assert "/" not in path.id and " " not in path.id
     assert "-tmp-hands-my-hand.yaml" in path.id
 
@@ -283,20 +304,21 @@ def test_a_grid_setting_splits_the_summary_instead_of_being_averaged(tmp_path):
 
     def rec(seed, h, err):
         return {"case": "apple", "status": "ok",
-                "settings": {"object": "apple", "seed": seed, "jitter_h": h,
-                             "nominal_theta_deg": [-10, 15]},
-                "result": {"errors": {"proximal_deg_mean": err}}}
+                "settings": {"world.object": "apple", "seed": seed, "filter.jitter_h": h,
+                             "filter.guess_theta_deg": [-10, 15]},
+                "result": {"object": "apple", "errors": {"proximal_deg_mean": err}}}
 
     records = [rec(0, 0.4, 1.0), rec(1, 0.4, 3.0), rec(0, 0.1, 10.0), rec(1, 0.1, 20.0)]
-    assert varying_settings(records) == ["jitter_h"]   # the seed is not a grid key
-    other = {**records[1], "settings": {**records[1]["settings"], "object": "wine_glass"}}
-    assert varying_settings(records + [other]) == ["jitter_h"]  # object has its column
+    assert varying_settings(records) == ["filter.jitter_h"]   # the seed is not a grid key
+    other = {**records[1],
+             "settings": {**records[1]["settings"], "world.object": "wine_glass"}}
+    assert varying_settings(records + [other]) == ["filter.jitter_h"]  # object has its column
     write_tables(tmp_path, records)
     summary = (tmp_path / "summary.csv").read_text().splitlines()
-    assert len(summary) == 3 and "jitter_h" in summary[0]
+    assert len(summary) == 3 and "filter.jitter_h" in summary[0]
     assert any(",0.4," in line and "2.00 ± 1.41" in line for line in summary)
     assert any(",0.1," in line and "15.00 ± 7.07" in line for line in summary)
-    assert "jitter_h" in (tmp_path / "table.csv").read_text().splitlines()[0]
+    assert "filter.jitter_h" in (tmp_path / "table.csv").read_text().splitlines()[0]
 
 
 def test_the_summary_counts_lost_grasps():
@@ -311,54 +333,53 @@ def test_the_summary_counts_lost_grasps():
 
 def test_every_documented_sweep_file_still_expands(monkeypatch):
     """docs/RESULTS.md quotes `vlr sweep docs/sweeps/X.yaml` for its tables: each file must
-    still name valid settings, objects, hands and unknowns, and its Run: line itself."""
-    import models
-
-    monkeypatch.chdir(models.ROOT.parent)  # the files' paths are the repository root's
-    sweeps = sorted(Path("docs", "sweeps").glob("*.yaml"))
-    assert len(sweeps) > 30
+    still name valid settings, objects, hands and unknowns; a '# Run: vlr ...' line, where a
+    file has one, names the file itself."""
+    root = Path(__file__).resolve().parents[1]
+    monkeypatch.chdir(root)  # the files' paths are the repository root's
+    sweeps = sorted((root / "docs" / "sweeps").rglob("*.yaml"))
+    assert sweeps
     for path in sweeps:
         trials = expand(load_sweep(path))
         assert trials, path.name
+        name = path.relative_to(root).as_posix()
         runs = [line for line in path.read_text().splitlines() if line.startswith("# Run: vlr ")]
-        assert runs and all(f" docs/sweeps/{path.name} " in f"{line} " for line in runs), (
-            f"{path.name}: its '# Run: vlr ...' line is missing or names another file")
+        assert all(f" {name} " in f"{line} " for line in runs), (
+            f"{name}: its '# Run: vlr ...' line names another file")
 
 
-def test_a_changed_default_keeps_the_ids_of_the_files_that_pin_it():
-    """The Liu-West draw's default became "log-springs" in session 41; the files measured
-    before pin "gaussian", and their trials keep the ids they were run under (computed at
-    ef18412), so `--resume` and `--table-only` still find them. A setting other than the
-    former default is hashed as before."""
-    from vlr.sweep import Trial
+def test_a_trials_id_hashes_every_setting_in_effect():
+    """A trial run under other settings is a new trial, never a finished one to skip: any
+    setting changes the id, down to a backend's world option. A setting given at its
+    backend's default is the same trial as one left to the default, however it is written."""
+    base = {"world.backend": "sim", "world.object": "toy_block", "seed": 2,
+            "filter.unknowns": ["stiffness:thumb.distal"]}
 
-    def trial(**kw):
-        return Trial("spring", TrialSettings(backend="sim", object="toy_block", seed=2,
-                                             unknowns=("stiffness:thumb.distal",), **kw))
+    def trial(case="spring", **dotted):
+        return Trial(case, load_settings(base, {k.replace("__", "."): v
+                                                for k, v in dotted.items()}))
 
-    assert trial(jitter_kernel="gaussian").id == "spring_toy_block_modelo_s2_a7901dbd"
-    assert trial(jitter_kernel="copula").id == "spring_toy_block_modelo_s2_df085b96"
-    assert trial().id != trial(jitter_kernel="gaussian").id
-
-
-def test_a_backends_changed_default_keeps_every_backends_ids():
-    """The synthetic world's action solve became "model" in session 42: a synthetic trial
-    that pins the former "loose" keeps the id it had at 8f0f879, one at the new default
-    gets a new id, and a sim trial, which has no such solve, keeps its id."""
-    from vlr.sweep import Trial
-
-    def synthetic(**kw):
-        return Trial("spring", TrialSettings(backend="synthetic", object="toy_block", seed=2,
-                                             rolling=True, jitter_kernel="gaussian",
-                                             unknowns=("stiffness:thumb.distal",), **kw))
-
-    assert synthetic(synthetic_solve="loose").id == "spring_toy_block_modelo_s2_b69bed29"
-    assert synthetic().id != synthetic(synthetic_solve="loose").id
-    sim = Trial("spring", TrialSettings(backend="sim", object="toy_block", seed=2,
-                                        unknowns=("stiffness:thumb.distal",),
-                                        jitter_kernel="gaussian"))
-    assert sim.id == "spring_toy_block_modelo_s2_a7901dbd"
-    with pytest.raises(UserError, match="synthetic_solve 'loose' is the synthetic world's"):
-        TrialSettings(backend="sim", synthetic_solve="loose")
-    with pytest.raises(UserError, match="synthetic_solve 'exact'"):
-        TrialSettings(backend="synthetic", synthetic_solve="exact")
+    ref = trial().id
+    assert ref.startswith("spring_toy_block_modelo_s2_")
+    assert trial(filter__motion__limit_stiffness=17.0).id == ref     # the sim's default
+    nested = Trial("spring", load_settings(base, {"filter": {"motion": {"limit_stiffness":
+                                                                           17.0}}}))
+    assert nested.id == ref
+    changed = {trial(filter__motion__limit_stiffness=100.0).id,
+               trial(filter__motion__contact_stiffness=2e4).id,
+               trial(filter__observation__sigma_turn_deg=0.5).id,
+               trial(filter__jitter_h=0.2).id,
+               trial(loop__action_band_mm=0.8).id,
+               trial(world__options__ramp_time=0.05).id,
+               trial(filter__motion__rolling=False).id,
+               trial(case="other").id.replace("other_", "spring_")}
+    assert len(changed) == 8 and ref not in changed
+    # the seed is in the name, not the hash
+    assert trial(seed=3).id == ref.replace("_s2_", "_s3_")
+    # the synthetic world's own option is hashed as every other setting
+    synthetic = {"world.backend": "synthetic", "filter.unknowns": ["stiffness:thumb.distal"]}
+    a = Trial("s", load_settings(synthetic, {"world.options.true_stiffness":
+                                             {"thumb.distal": 0.045}}))
+    b = Trial("s", load_settings(synthetic, {"world.options.true_stiffness":
+                                             {"thumb.distal": 0.05}}))
+    assert a.id != b.id

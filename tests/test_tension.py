@@ -1,6 +1,6 @@
-"""The hand's tendon tensions in the likelihood (`ObservationModel.sigma_tension`,
-`TrialSettings.sigma_tension_n`; issue #5): the term's arithmetic, that it is only weighed
-where the hand reads tensions, and that the sim reports them with every move."""
+"""The hand's tendon tensions in the likelihood (`ObservationModel.sigma_tension`, the setting
+`filter.observation.sigma_tension_n`): the term's arithmetic, that it is only weighed where
+the hand reads tensions, and that the sim reports them with every move."""
 
 import types
 from dataclasses import replace
@@ -10,8 +10,18 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from vlr.errors import UserError
-from vlr.observation import ObservationModel, PomObservation, TensionedObservation
-from vlr.trial import TrialSettings, run_trial
+from vlr.observation import (
+    ObservationConfig,
+    ObservationModel,
+    PomObservation,
+    TensionedObservation,
+)
+from vlr.settings import load_settings
+
+
+def _settings(backend: str, **dotted):
+    return load_settings({"world.backend": backend},
+                         {k.replace("__", "."): v for k, v in dotted.items()})
 
 
 def _particles(n: int = 5) -> types.SimpleNamespace:
@@ -28,8 +38,10 @@ def test_tension_term_is_independent_gaussians_on_the_tensions():
     obs = TensionedObservation(pose.position, pose.rotation, observed)
     predicted = observed + np.array([[0, 0, 0], [0.5, 0, 0], [0, -1.0, 0.5], [2, 2, 2],
                                      [0, 0, 0]])
-    om = ObservationModel(sigma_pos=2e-4, sigma_rot=0.007, sigma_tension=0.5)
-    pose_only = ObservationModel(sigma_pos=2e-4, sigma_rot=0.007).log_likelihood(st, pose)
+    scales = dict(sigma_pos_mm=0.2, sigma_rot_deg=float(np.degrees(0.007)))
+    om = ObservationModel(ObservationConfig(**scales, sigma_tension_n=0.5))
+    assert om.sigma_tension == 0.5 and om.sigma_pos == pytest.approx(2e-4)
+    pose_only = ObservationModel(ObservationConfig(**scales)).log_likelihood(st, pose)
     ll = om.log_likelihood(st, obs, tensions=predicted)
     expected = pose_only - 0.5 * (((predicted - observed) / 0.5) ** 2).sum(axis=1)
     np.testing.assert_allclose(ll, expected)
@@ -42,25 +54,45 @@ def test_tension_term_is_independent_gaussians_on_the_tensions():
 
 
 def test_bad_tension_settings_are_named():
-    with pytest.raises(ValueError, match="sigma_tension -1"):
-        ObservationModel(sigma_tension=-1.0)
-    with pytest.raises(UserError, match="sigma_tension_n -0.5"):
-        TrialSettings(sigma_tension_n=-0.5)
-    with pytest.raises(UserError, match="sigma_tension_n 'firm'"):
-        TrialSettings(sigma_tension_n="firm")
-    # The synthetic world and the real hand read no tensions: refused by name, before any
-    # hand moves; and by the loop itself for a hand that reports none.
-    with pytest.raises(UserError, match="synthetic world does not report"):
-        TrialSettings(backend="synthetic", sigma_tension_n=0.5)
-    from vlr.identify import IdentifyConfig, identify
-    from vlr.trial import open_world
+    with pytest.raises(ValueError, match="sigma_tension_n -1"):
+        ObservationConfig(sigma_tension_n=-1.0)
+    with pytest.raises(UserError, match="filter.observation.sigma_tension_n: .*-0.5"):
+        _settings("sim", filter__observation__sigma_tension_n=-0.5)
+    with pytest.raises(UserError, match="filter.observation.sigma_tension_n: 'firm'"):
+        _settings("sim", filter__observation__sigma_tension_n="firm")
+    # The synthetic world reads no tensions: refused by name, before any hand moves; and by
+    # the loop itself for a hand that reports none.
+    from vlr.identify import LoopConfig, identify
+    from vlr.world import open_world
 
-    w = open_world(TrialSettings(backend="synthetic", particles=50))
-    cfg = IdentifyConfig(max_iterations=1, filter=replace(
-        IdentifyConfig().filter, n_particles=50,
-        observation=ObservationModel(sigma_tension=0.5)))
+    with pytest.raises(UserError, match="sigma_tension_n: the synthetic world does not report"):
+        open_world(_settings("synthetic", filter__observation__sigma_tension_n=0.5))
+    s = _settings("synthetic", filter__particles=50)
+    w = open_world(s)
+    weighing = replace(s.filter, observation=replace(s.filter.observation,
+                                                     sigma_tension_n=0.5))
     with pytest.raises(UserError, match="does not report them"):
-        identify(w.world, w.observer, w.model, w.obj, w.nominal, cfg)
+        identify(w.world, w.observer, w.model, w.obj, w.nominal, weighing,
+                 LoopConfig(max_iterations=1))
+
+
+def test_a_hand_that_reads_no_tensions_is_refused_by_name():
+    """`vlr.world.hand_world` refuses the tension term for a hand without readings (the
+    real hand without a `tension` calibration) before the loop starts."""
+    from vlr.world import hand_world
+
+    class Deaf:
+        reads_tensions = False
+        object_spec = spec = None
+
+    s = _settings("hardware", filter__observation__sigma_tension_n=0.5)
+    model = types.SimpleNamespace(names=("thumb", "left", "right"))
+    deaf = Deaf()
+    deaf.spec = types.SimpleNamespace(name="modelo")
+    deaf.object_spec = types.SimpleNamespace(name="apple", tag_id=0, tag_size=0.02)
+    with pytest.raises(UserError, match="filter.observation.sigma_tension_n: this hardware "
+                       "hand does not report"):
+        hand_world(deaf, s, model, None, None, deaf.spec, deaf.object_spec)
 
 
 def test_sim_trial_weighs_the_reported_tensions():
@@ -71,9 +103,13 @@ def test_sim_trial_weighs_the_reported_tensions():
         assert report.tensions.shape == (3,) and np.all(report.tensions > 5.0)
         moved = hand.apply(np.array([3e-4, 0.0, 0.0]))
         np.testing.assert_allclose(moved.tensions, hand.static_tensions())
-    r = run_trial(TrialSettings(backend="sim", object="apple", particles=500,
-                                max_iterations=2, sigma_tension_n=0.5))
+    from vlr.run import run_identification
+
+    r = run_identification(_settings("sim", world__object="apple", filter__particles=500,
+                                     loop__max_iterations=2,
+                                     filter__observation__sigma_tension_n=0.5)).summary
     assert r["iterations"] == 2 and np.isfinite(r["errors"]["proximal_deg_mean"])
+    assert r["settings"]["filter.observation.sigma_tension_n"] == 0.5
 
 
 def test_sim_tension_noise_is_seeded_and_only_in_the_reading():
@@ -97,7 +133,15 @@ def test_sim_tension_noise_is_seeded_and_only_in_the_reading():
     assert not np.allclose(readings(1, 0.5)[0] - spring, noisy - spring)
     with pytest.raises(SpecError, match="tension_noise_n = -1"):
         SimOptions(tension_noise_n=-1.0)
-    with pytest.raises(UserError, match="tension_noise_n is the sim's"):
-        TrialSettings(backend="synthetic", tension_noise_n=0.5)
-    with pytest.raises(UserError, match="tension_noise_n 'loud'"):
-        TrialSettings(tension_noise_n="loud")
+    # The option is the sim's world's (`sim.backend.SimWorldOptions`), and reaches its hand.
+    with pytest.raises(UserError, match="unknown setting 'world.options.tension_noise_n'"):
+        _settings("synthetic", world__options__tension_noise_n=0.5)
+    with pytest.raises(UserError, match="world.options.tension_noise_n: 'loud'"):
+        _settings("sim", world__options__tension_noise_n="loud")
+    from vlr.world import open_world
+
+    w = open_world(_settings("sim", filter__particles=50, world__options__tension_noise_n=0.5))
+    try:
+        assert w.hand.options.tension_noise_n == 0.5
+    finally:
+        w.close()

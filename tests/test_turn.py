@@ -1,9 +1,9 @@
-"""The likelihood's turn term (`vlr.observation`: `grasp_turn`, `ObservationModel.sigma_turn`;
-issue #5). `vlr gap` finds most of the model's per-action pose error along the object's turn
-in its grip; the term gives that one direction of the 6-D pose error its own scale. Checked
-here: the Sherman-Morrison form equals the dense Gaussian, a pure turn costs little and the
-same error off the turn a lot, the axis runs from the thumb, and the Cramér-Rao floor with
-the term equals the dense computation."""
+"""The likelihood's turn term (`vlr.observation`: `grasp_turn`, `ObservationModel.sigma_turn`,
+the setting `filter.observation.sigma_turn_deg`). `vlr gap` finds most of the model's
+per-action pose error along the object's turn in its grip; the term gives that one direction
+of the 6-D pose error its own scale. Checked here: the Sherman-Morrison form equals the dense
+Gaussian, a pure turn costs little and the same error off the turn a lot, the axis runs from
+the thumb, and each backend's default scale reaches the filter."""
 
 import types
 
@@ -12,8 +12,23 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from vlr.errors import UserError
-from vlr.observation import ObservationModel, PomObservation, grasp_turn, rotation_error
-from vlr.trial import TrialSettings, _turn
+from vlr.observation import (
+    ObservationConfig,
+    ObservationModel,
+    PomObservation,
+    grasp_turn,
+    rotation_error,
+)
+from vlr.settings import load_settings
+
+
+def _model(sigma_pos: float = 5e-4, sigma_rot: float = np.radians(1.0),
+           sigma_turn: float = 0.0, names=("thumb", "left", "right")) -> ObservationModel:
+    """The likelihood at SI scales [m, rad], its turn axis from the finger named "thumb"."""
+    config = ObservationConfig(sigma_pos_mm=sigma_pos * 1e3,
+                               sigma_rot_deg=float(np.degrees(sigma_rot)),
+                               sigma_turn_deg=float(np.degrees(sigma_turn)))
+    return ObservationModel(config, types.SimpleNamespace(names=tuple(names)))
 
 
 def _particles(n: int = 6, seed: int = 0) -> types.SimpleNamespace:
@@ -29,7 +44,9 @@ def test_turn_likelihood_is_the_dense_gaussian():
     st = _particles()
     obs = PomObservation(st.pos[0] + 3e-4,
                          Rotation.from_rotvec([0.01, 0.02, -0.01]).as_matrix() @ st.rot[0])
-    om = ObservationModel(sigma_pos=2e-4, sigma_rot=0.004, sigma_turn=0.012, opposed=1)
+    om = _model(2e-4, 0.004, 0.012, names=("left", "thumb", "right"))
+    assert om.opposed == 1
+    assert (om.sigma_pos, om.sigma_rot, om.sigma_turn) == pytest.approx((2e-4, 0.004, 0.012))
     ll = om.log_likelihood(st, obs)
     v = grasp_turn(st.pos, st.rot, st.anchors, 1)
     d = np.diag(np.repeat([om.sigma_pos ** 2, om.sigma_rot ** 2], 3))
@@ -48,7 +65,7 @@ def test_a_failed_solve_gets_no_weight_not_an_error():
     st.rot[1] = np.nan
     st.rot[2] = 0.0
     obs = PomObservation(st.pos[0], st.rot[0])
-    ll = ObservationModel(sigma_turn=0.01).log_likelihood(st, obs)
+    ll = _model(sigma_turn=0.01).log_likelihood(st, obs)
     assert np.isfinite(ll[0]) and np.isneginf(ll[1:]).all()
 
 
@@ -64,12 +81,11 @@ def test_a_turn_costs_little_and_the_same_error_off_it_a_lot():
     perp = np.cross(v[3:], [1.0, 0.0, 0.0])
     perp /= np.linalg.norm(perp)
     off = PomObservation(st.pos[0], Rotation.from_rotvec(-turn * perp).as_matrix() @ st.rot[0])
-    om = ObservationModel(sigma_pos=0.15e-3, sigma_rot=np.radians(0.3),
-                          sigma_turn=np.radians(0.8))
+    om = _model(0.15e-3, np.radians(0.3), np.radians(0.8))
     ll_along, ll_off = om.log_likelihood(st, along)[0], om.log_likelihood(st, off)[0]
     # Along: about 0.5 (the quadratic) + 1.1 (the normalisation); off: 0.5 (0.8 / 0.3)^2.
     assert ll_along > -2.0 and ll_off < ll_along - 2.0
-    flat = ObservationModel(sigma_pos=0.15e-3, sigma_rot=np.radians(0.3))
+    flat = _model(0.15e-3, np.radians(0.3))
     assert flat.log_likelihood(st, along)[0] < ll_along - 3
 
 
@@ -85,21 +101,40 @@ def test_the_turn_axis_runs_from_the_thumb_to_the_others():
 
 
 def test_bad_turn_settings_are_named():
-    with pytest.raises(ValueError, match="sigma_turn -1"):
-        ObservationModel(sigma_turn=-1.0)
-    with pytest.raises(ValueError, match="set one"):
-        ObservationModel(sigma_turn=0.01, motion_fraction=0.1)
-    with pytest.raises(UserError, match="sigma_turn_deg -0.5"):
-        TrialSettings(sigma_turn_deg=-0.5)
-    with pytest.raises(UserError, match="sigma_turn_deg 'wide'"):
-        TrialSettings(sigma_turn_deg="wide")
-    with pytest.raises(UserError, match="from the thumb"):
-        _turn(TrialSettings(sigma_turn_deg=0.8), types.SimpleNamespace(names=("a", "b", "c")))
-    hand = types.SimpleNamespace(names=("left", "thumb", "right"), finger_index=lambda n: 1)
-    assert _turn(TrialSettings(sigma_turn_deg=0.8), hand) == {
-        "sigma_turn": pytest.approx(np.radians(0.8)), "opposed": 1}
-    assert _turn(TrialSettings(sigma_turn_deg=0), hand) == {}
-    assert _turn(TrialSettings(backend="synthetic"), hand) == {}
-    # The sim's default with rolling contacts (vlr.trial.ROLLING_TURN_SIGMA).
-    assert _turn(TrialSettings(backend="sim"), hand) == {
-        "sigma_turn": pytest.approx(np.radians(1.0)), "opposed": 1}
+    with pytest.raises(ValueError, match="sigma_turn_deg -1"):
+        ObservationConfig(sigma_turn_deg=-1.0)
+    with pytest.raises(UserError, match="filter.observation.sigma_turn_deg: .*-0.5"):
+        load_settings({"filter.observation.sigma_turn_deg": -0.5})
+    with pytest.raises(UserError, match="filter.observation.sigma_turn_deg: 'wide'"):
+        load_settings({"filter.observation.sigma_turn_deg": "wide"})
+    # The axis runs from the finger named "thumb": a hand without one cannot take the term.
+    with pytest.raises(ValueError, match="from a finger named 'thumb'"):
+        _model(sigma_turn=np.radians(0.8), names=("a", "b", "c"))
+    assert _model(names=("a", "b", "c")).sigma_turn == 0.0    # without the term, fine
+    om = _model(sigma_turn=np.radians(0.8), names=("left", "thumb", "right"))
+    assert (om.sigma_turn, om.opposed) == (pytest.approx(np.radians(0.8)), 1)
+    assert _model(names=("left", "thumb", "right")).sigma_turn == 0.0
+
+
+def test_the_turn_term_follows_the_backend():
+    """The sim's default likelihood has the turn term at 1 deg; the synthetic world and the
+    real hand have none; an explicit scale wins, and 0 turns it off."""
+    from vlr.filter import ParticleFilter
+    from vlr.kinematics import HandModel
+    from vlr.motion import ObjectParams
+    from vlr.spec import load_hand, load_object
+
+    model = HandModel.from_spec(load_hand("modelo"))
+    obj = ObjectParams.from_spec(load_object("apple"))
+
+    def turn(backend: str, **dotted) -> tuple[float, int]:
+        s = load_settings({"world.backend": backend, "filter.particles": 50}, dotted)
+        om = ParticleFilter(model, obj, s.filter).obs_model
+        return om.sigma_turn, om.opposed
+
+    thumb = model.names.index("thumb")
+    assert turn("sim") == (pytest.approx(np.radians(1.0)), thumb)
+    assert turn("synthetic")[0] == 0.0 and turn("hardware")[0] == 0.0
+    assert turn("sim", **{"filter.observation.sigma_turn_deg": 0})[0] == 0.0
+    assert turn("synthetic", **{"filter.observation.sigma_turn_deg": 0.8})[0] == pytest.approx(
+        np.radians(0.8))

@@ -9,9 +9,9 @@ import pytest
 from vlr import view as view_mod
 from vlr.cli import main
 from vlr.filter import FilterConfig
-from vlr.identify import IdentifyConfig, identify
+from vlr.identify import LoopConfig, identify
 from vlr.kinematics import HandModel, contact_points, joint_positions
-from vlr.motion import ObjectParams
+from vlr.motion import MotionConfig, ObjectParams
 from vlr.spec import load_hand, load_object
 from vlr.synthetic import SyntheticConfig, SyntheticWorld, nominal_grasp
 from vlr.view import COLORS, FilterView, find_chromium, hypotheses, screenshot
@@ -51,10 +51,12 @@ def _trial(view: FilterView, iterations: int = 3, particles: int = 1500) -> None
     obj = ObjectParams.from_spec(load_object("apple"))
     world = SyntheticWorld(m, obj, SyntheticConfig(seed=1))
     view.truth = world.truth
-    cfg = IdentifyConfig(max_iterations=iterations,
-                         filter=FilterConfig(n_particles=particles, seed=1))
+    # The synthetic world's own model (pinned contacts), its prior about the pads' contacts.
+    cfg = FilterConfig(particles=particles, motion=MotionConfig(rolling=False),
+                       contact_prior="pad")
     identify(world, view.observing(world.observe), m, obj,
-             nominal_grasp(m, obj, SyntheticConfig()), cfg, watch=view)
+             nominal_grasp(m, obj, SyntheticConfig()), cfg,
+             LoopConfig(max_iterations=iterations), seed=1, watch=view)
 
 
 def test_view_serves_exports_and_always_stops_its_server(tmp_path):
@@ -96,7 +98,7 @@ def test_identify_view_flags_serve_then_save_and_stop(tmp_path, monkeypatch, cap
     page = tmp_path / "page" / "scene.html"
     rc = main(["identify", "--backend", "synthetic", "--particles", "300", "--max-iterations",
                "2", "--out", str(tmp_path / "run"), "--quiet", "--view", "--view-html",
-               str(page), "--cloud-at", "0,2,99"])
+               str(page)])
     assert rc == 0
     out = capsys.readouterr().out
     assert f"view: {views[0].url}" in out and str(page) in out

@@ -1056,8 +1056,10 @@ def solve_path_batch(theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u_from, u_
                     frac = j / follow
                     for i in range(n_f):
                         u_b[i] = u_from[i] + (u_to[i] - u_from[i]) * frac
+                    # No predictor here: a move that needs following is steep where a
+                    # secant step overshoots onto another branch (a jump).
                     st2, it2 = _path(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u_a,
-                                     u_b, substeps, rolling, predict, rho, has_rho, srf,
+                                     u_b, substeps, rolling, False, rho, has_rho, srf,
                                      base_pos,
                                      base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy,
                                      pad_r, omass, ocom, grav, flags, prm, 2 * max_iter, sc)
