@@ -66,7 +66,7 @@ class SpreadMotor:
 
 
 @dataclass(frozen=True)
-class MotionConfig:
+class TendonMotion:
     """How tendons move.
 
     mode: run-time operating mode (extended position 4, or current-based position 5).
@@ -113,10 +113,10 @@ class CalibrationConfig:
 class TensionConfig:
     """Tendon tension from each finger motor's present current once the motors stop,
     T = newton_per_ma x (direction x current - zero_ma), at least 0 (`ApplyReport.tensions`; the
-    likelihood weighs them with `vlr identify --sigma-tension`). Both numbers come from the
-    user's own calibration against a load cell in the line: the gearbox's friction makes a
-    servo's current a rough tension sensor, and nothing here has been measured on a real hand
-    (docs/RESULTS.md 2, "What would converge in 15").
+    likelihood weighs them with `vlr identify --set filter.observation.sigma_tension_n=N`).
+    Both numbers come from the user's own calibration against a load cell in the line: the
+    gearbox's friction makes a servo's current a rough tension sensor, and nothing here has
+    been measured on a real hand (docs/RESULTS.md, "A second sensor").
 
     newton_per_ma: tendon tension per mA of present current [N/mA] (about 0.18 for an XM430
     on a 10 mm spool, from its torque constant, before gear losses); zero_ma: the present
@@ -164,7 +164,7 @@ class HardwareConfig:
     object: str
     bus: BusConfig
     fingers: tuple[FingerMotor, ...]
-    motion: MotionConfig
+    motion: TendonMotion
     grasp: GraspConfig
     camera: CameraConfig
     spread: SpreadMotor | None = None
@@ -381,12 +381,12 @@ def _spread(s: _Section | None) -> SpreadMotor | None:
     return out
 
 
-def _motion(s: _Section) -> MotionConfig:
+def _motion(s: _Section) -> TendonMotion:
     mode_name = s.string("mode", "current_based_position", tuple(RUN_MODES))
     rng = s.numbers("range", 2)
     if not rng[0] < rng[1]:
         s.fail(s.key("range"), list(rng), "must be [lo, hi] with lo < hi")
-    out = MotionConfig(
+    out = TendonMotion(
         spool_radius=s.number("spool_radius", lo=0.0, hi=0.1, strict_lo=True),
         max_step=s.number("max_step", lo=0.0, hi=0.05, strict_lo=True),
         range=(rng[0], rng[1]),

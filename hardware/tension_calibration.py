@@ -1,14 +1,14 @@
 """`vlr tension-calibrate`: fit the hand's present-current-to-tension map against a load cell.
 
-The real hand reports tendon tensions (for `vlr identify --sigma-tension`) through the
-config's `tension` section, T = newton_per_ma x (direction x current - zero_ma)
-(`hardware.config.TensionConfig`). This command measures both numbers: with the object
-grasped, it pulls every tendon through a list of commands about the grasp; after each move
-settles it reads each finger motor's present current, and you type the tension a load cell
-in each line shows. One slope for all motors (the same XM430 on the same spool) and one zero
-per motor are fitted by least squares; the residuals' RMS is the reading's error, the
-smallest `--sigma-tension` to give the filter. The result is printed as the config's
-`tension` section, and with `--out` written to a YAML file (atomically).
+The real hand reports tendon tensions (for `vlr identify --set
+filter.observation.sigma_tension_n=N`) through the config's `tension` section, T = newton_per_ma
+x (direction x current - zero_ma) (`hardware.config.TensionConfig`). This command measures both
+numbers: with the object grasped, it pulls every tendon through a list of commands about the
+grasp; after each move settles it reads each finger motor's present current, and you type the
+tension a load cell in each line shows. One slope for all motors (the same XM430 on the same
+spool) and one zero per motor are fitted by least squares; the residuals' RMS is the reading's
+error, the smallest `filter.observation.sigma_tension_n` to give the filter. The result is
+printed as the config's `tension` section, and with `--out` written to a YAML file (atomically).
 
     vlr tension-calibrate --config my_hand.yaml --pulls-mm -0.2 0 0.2 0.4 0.6 --out tension.yaml
 """
@@ -157,7 +157,7 @@ def tension_yaml(fit: TensionFit) -> str:
     zeros = ", ".join(f"{z:.1f}" for z in fit.config.zero_ma)
     return (f"# vlr tension-calibrate: residual RMS {fit.rms_n:.3f} N "
             f"(per finger {', '.join(f'{r:.3f}' for r in fit.rms_by_finger_n)}); "
-            f"give --sigma-tension at least that\n"
+            f"give filter.observation.sigma_tension_n at least that\n"
             f"tension:\n  newton_per_ma: {fit.config.newton_per_ma:.5f}\n"
             f"  zero_ma: [{zeros}]\n")
 

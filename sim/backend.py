@@ -398,7 +398,7 @@ class SimWorldOptions:
     Attributes:
         ramp_time: how long the sim takes to make each command change [s]
             (`SimOptions.ramp_time`): the hardware backend's default move, 5 goal positions
-            20 ms apart (`hardware.config.MotionConfig`), so that the sim moves as the real
+            20 ms apart (`hardware.config.TendonMotion`), so that the sim moves as the real
             hand is moved. At 50 ms the fingers, whose springs and damping settle in about
             as long, lag the command, and a contact can slide where the quasi-static model
             rolls (docs/DECISIONS.md).

@@ -56,3 +56,13 @@ def test_documented_sweeps_load(sweep):
     from vlr.sweep import expand, load_sweep
 
     assert expand(load_sweep(sweep))
+
+
+def test_readme_python_identification_runs_as_written(capsys):
+    """The README's five lines of the main job from Python, executed as they stand."""
+    text = (ROOT / "README.md").read_text()
+    blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
+    main_job = next(b for b in blocks if "run_identification" in b)
+    exec(compile(main_job, "README.md", "exec"), {})  # noqa: S102 (the README's own code)
+    out = capsys.readouterr().out
+    assert "thumb.0" in out and "proximal_deg_mean" in out

@@ -4,7 +4,7 @@ One short recording on the apple (12 actions, seed 0), every model rung measured
 The recording is made with the sim's commands ramped over 50 ms, the model's stops at
 100 N m/rad (`MotionConfig`'s default; the sim identification's are 17) and its solves
 converged to 1e-6 rad (`MEASURED`): the settings the figures were measured at. At 30
-actions, seed 0 (docs/RESULTS.md 5): with all terms and rolling (4 substeps) the per-action
+actions, seed 0 (docs/RESULTS.md): with all terms and rolling (4 substeps) the per-action
 ratio is 0.120 (position) / 0.247 (orientation) on the apple, with the pads' friction 0.054
 / 0.191; the pinned contacts with weights 0.30 / 0.99; the static gap 0.14-0.16 mm. At 12
 actions: 0.056 / 0.194 with friction, 0.144 / 0.279 rolling without it, 0.253 / 0.861
@@ -175,7 +175,7 @@ def test_starting_from_the_sims_contact_loads():
 
 
 def test_the_hardware_backends_move_closes_the_gelatin_box_drift():
-    """The open-loop drift's one miss (docs/RESULTS.md 5): the gelatin box's seed 2, friction
+    """The open-loop drift's one miss (docs/RESULTS.md): the gelatin box's seed 2, friction
     rung, 8 rolling substeps and the sim identification's stops (17 N m/rad). With the sim's
     commands ramped over 50 ms its action 3 slides the left pad where the model rolls it,
     and the drift over 15 actions is 0.059 in orientation; over 0.1 s, the hardware
@@ -199,7 +199,7 @@ def test_the_hardware_backends_move_closes_the_gelatin_box_drift():
 def test_the_model_wants_the_true_thumb_spring_from_the_true_states():
     """`vlr gap --fit` (sim.gap_fit): the thumb's distal spring whose predicted motions cost
     least, from the sim's true states, with the filter's model (rolling, the sim's stops).
-    Measured at 40 actions on seeds 0-4 (docs/RESULTS.md 5): 0.0445-0.045 against the true
+    Measured at 40 actions on seeds 0-4 (docs/RESULTS.md): 0.0445-0.045 against the true
     0.045, each action from the truth and open loop alike; the pinned model with weights
     wants 0.0465-0.0485. So the filter's estimates above the truth (+6% on fifteen seeds)
     are the estimator's lean, not the model's."""

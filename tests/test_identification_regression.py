@@ -123,7 +123,7 @@ def test_sim_unknown_curvature_of_an_apple_believed_flat():
     # contacts are found to 0.60 mm (4.75 believed flat and known), proximal 0.23 deg (0.28),
     # curvature 21.9 /m, interval 7.8-36.2 (seed 1: 1.41 mm against 4.32, 0.40 deg against
     # 1.55, interval 8.4-39.7). The camera tells the curvature only roughly: `vlr crb` bounds
-    # its sd after 20 actions at 11-12 /m against the prior's 14.4 (docs/RESULTS.md 5); what
+    # its sd after 20 actions at 11-12 /m against the prior's 14.4 (docs/RESULTS.md); what
     # it wins is each particle's pads on its own ball.
     r = _run({"world.backend": "sim", "world.object": "apple", "filter.particles": 3000,
               "seed": 0, "loop.max_iterations": 20, "filter.object.curvature": 0.0,
@@ -145,7 +145,7 @@ def test_sim_nh1_unknown_link_lengths():
     # interval 33.8-42.2, 1.17 deg (seed 1: 0.6 mm, 3.13 deg). At 0.35 mm / 0.7 deg without the
     # turn: 2.5 mm, interval 31.8-43.6, 1.25 deg (seed 1: 0.5 mm, 2.76 deg). (The pad offset, true
     # 27 mm against 32, ends 7.6 mm off (seed 1: 4.6; at the 50 ms ramp 7.9 and 4.3; at stops 100
-    # 7.3 and 3.0; the pad prior 10.5), worse than the prior's 1.8 on seed 0: docs/RESULTS.md 2, so
+    # 7.3 and 3.0; the pad prior 10.5), worse than the prior's 1.8 on seed 0 (docs/RESULTS.md), so
     # it is not asserted.)
     r = _run({"world.backend": "sim", "world.object": "apple", "world.true_hand": "nh1",
               "filter.particles": 3000, "seed": 0, "loop.max_iterations": 12,

@@ -2,7 +2,7 @@
 
 The synthetic world (the filter's own model, pinned contacts) checks the machinery: the
 central differences are the model's derivatives, information only grows, narrower scales
-give a narrower floor. The sim checks the finding of docs/RESULTS.md 5 ("What limits the
+give a narrower floor. The sim checks the finding of docs/RESULTS.md ("What limits the
 intervals"): on the apple, seed 0, the floor after the paper's 15 random actions is about
 5 degrees at the sim's likelihood (0.2 mm, 0.4 degree and a 1-degree turn) and about 1 at
 the camera's scales (0.05 mm, 0.2 degree), the criterion (docs/METHOD.md 3) being 2 degrees.
@@ -130,7 +130,7 @@ def test_apple_floor_is_above_the_criterion_at_the_likelihoods_scales():
     # commands ramped over 0.1 s): 5.20 and 0.96 degrees, scales 0.31x (5.18 and 0.95 with the
     # stops at 100; 4.64 and 0.95, 0.35x, at 0.35 mm / 0.7 deg without the turn); the model's
     # information, not the particle count, keeps the likelihood's floor above 2 degrees
-    # (docs/RESULTS.md 5).
+    # (docs/RESULTS.md).
     assert 3.5 < at[15]["mean_width_deg"] < 6.0
     assert at[15]["mean_width_deg_camera"] < 1.5
     assert at[15]["mean_width_deg"] < 0.5 * at[1]["mean_width_deg"]

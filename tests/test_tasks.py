@@ -223,7 +223,7 @@ def test_the_users_grasp_guess_centres_the_tasks_prior():
     """The grasp guess and the prior's spread (`filter.guess_theta_deg`,
     `filter.theta_spread_deg`) reach the identification in reset, and the sim's default
     guess identifies the apple grasp where the generic guess does not (ground truth read
-    after the fact, for scoring: docs/TASKS.md, "The grasp guess")."""
+    after the fact, for scoring: docs/TASKS.md)."""
     from tasks.handwriting import HandwritingEnv
 
     errors = {}

@@ -122,6 +122,9 @@ def run_identification(settings: Settings, *, progress: Callable | None = None,
     summary = summarize(result, w.model, settings, time.perf_counter() - t0,
                         truths[-1] if truths else None)
     summary["settings"] = settings.flat()
+    # What ran: a backend may hold another hand or object than the settings name (the real
+    # hand's config names its own).
+    summary["hand"], summary["object"] = w.hand_spec.name, w.object_spec.name
     if hasattr(w.world, "regrasps"):  # synthetic: truths drawn again for sitting at a fold
         summary["world_regrasps"] = int(w.world.regrasps)
     return Identification(settings, result, w.model, truths, summary, box.get("pf"))

@@ -147,16 +147,16 @@ def load_sweep(path: str | Path, out: str | Path | None = None) -> SweepSpec:
     where = f"sweep file {str(path)!r}"
     settings = raw.get("settings") or {}
     if not isinstance(settings, dict):
-        raise UserError(f"{where}: settings must be a mapping, e.g. {{backend: synthetic}}")
+        raise UserError(f"{where}: settings must be a mapping, e.g. {{world.backend: synthetic}}")
     cases = raw.get("cases") or [{}]
     if not isinstance(cases, list) or not all(isinstance(c, dict) for c in cases):
         raise UserError(f"{where}: cases must be a list of mappings, e.g. "
-                        "[{name: known hand}, {name: stiffness, unknowns: [...]}]")
+                        "[{name: known hand}, {name: stiffness, filter.unknowns: [...]}]")
     grid = raw.get("grid") or {}
     if not isinstance(grid, dict) or not all(isinstance(v, list) and v
                                              for v in grid.values()):
         raise UserError(f"{where}: grid must map settings to non-empty lists, e.g. "
-                        "{object: [apple, wine_glass]}")
+                        "{world.object: [apple, wine_glass]}")
     if any("seed" in d for d in (settings, grid, *cases)):
         raise UserError(f"{where}: give seeds with the top-level seeds:, not as a setting")
     target = out or raw.get("out")
@@ -186,9 +186,13 @@ def expand(spec: SweepSpec) -> list[Trial]:
                 except UserError as exc:
                     raise UserError(f"case {name!r}: {exc}") from None
                 trials.append(Trial(name, settings, None if group is None else str(group)))
-    ids = [t.id for t in trials]
-    if len(set(ids)) != len(ids):
-        raise UserError("the sweep defines the same trial twice; check cases and grid")
+    seen: dict[str, str] = {}
+    for t in trials:
+        if t.id in seen:
+            raise UserError(f"cases {seen[t.id]!r} and {t.case!r} define the same trial "
+                            f"({t.settings.world.object}, seed {t.settings.seed}): give one "
+                            "of them other settings or another name")
+        seen[t.id] = t.case
     _check_names(trials)
     return trials
 
