@@ -1,7 +1,7 @@
 """`vlr gap`: the model-world gap from the simulator's true state (`sim.gap`), per object and
 seed, model term by term, as a report, JSON and a CSV table.
 
-    vlr gap --object all --seeds 0-2 --csv docs/results/gap.csv
+    vlr gap --object all --seeds 0-2 --csv gap.csv
 """
 
 from __future__ import annotations

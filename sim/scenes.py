@@ -8,15 +8,14 @@ identification. The maze's walls come from the task as segments in the plate fra
 at the plate's top centre, axes those of the object frame O), so that the layout lives with
 the task and the sim only builds it.
 
-`CupsHand` is a `SimHand` on an arm: the palm rides on three servoed slide joints (the wrist
-of an arm with known kinematics, moved by `move_arm`; its orientation is fixed), palm
-facing down over a table with five upright nesting cups (models/objects/cup1..5.yaml), their
-tags on the inside bottom where the palm camera sees them through the opening when the hand
-comes from above. Each cup but the target rests tilted on a small support block under one
-side of its bottom (a 12 x 20 mm block whose height sets the tilt), so its pose in the hand
-after a pick is unknown. The held object is whichever cup
-`select` names; `grasp` picks it where it stands (no reset: the rest of the table keeps
-its state).
+`CupsHand` is a `SimHand` on an arm: the palm rides on three servoed slide joints (the wrist of
+an arm with known kinematics, moved by `move_arm`; its orientation is fixed), palm facing down
+over a table with five upright nesting cups (models/objects/cup1.yaml to cup5.yaml), their tags
+on the inside bottom where the palm camera sees them through the opening when the hand comes
+from above. Each cup but the target rests tilted on a small support block under one side of its
+bottom (a 12 x 20 mm block whose height sets the tilt), so its pose in the hand after a pick is
+unknown. The held object is whichever cup `select` names; `grasp` picks it where it stands (no
+reset: the rest of the table keeps its state).
 
 Ground truth here (marble position, plate pose, cup poses) is for scoring and `info` only.
 """

@@ -2,7 +2,7 @@
 grasped at an unknown tilt, corrects each in the hand (weighted SE(3), Eq. 12, alpha 0.7 mm
 per degree) and stacks them into the target cup.
 
-Geometry, and why. The cups (models/objects/cup1..5.yaml) are open, tapered and nest: rim
+Geometry, and why. The cups (models/objects/cup1.yaml to cup5.yaml) are open, tapered and nest: rim
 radii 40, 36, 32, 28, 24 mm, 60 mm tall, 2 mm walls flaring out by 6 degrees, so each cup
 fits in the next larger one with 2 mm to spare. Each carries its tag on the INSIDE bottom:
 the cups stand upright, the hand comes from above, palm down, and the palm camera sees the

@@ -45,6 +45,8 @@ def test_cited_repository_files_exist():
         if path.suffix not in {".py", ".md", ".yaml"} or not path.is_file():
             continue
         for ref in cited.findall(path.read_text(errors="ignore")):
+            if Path(ref).stem.isupper():   # a placeholder: models/fingers/NAME.yaml
+                continue
             if not (ROOT / ref).exists() and not (path.parent / ref).exists():
                 missing.append(f"{path.relative_to(ROOT)}: {ref}")
     assert not missing, missing[:10]

@@ -117,7 +117,7 @@ def test_bad_sweep_files_name_the_problem(tmp_path):
     p.write_text("seeds: 0\nout: x\ngird: {world.object: [apple]}\n")
     with pytest.raises(UserError, match="gird"):
         load_sweep(p)
-    with pytest.raises(UserError, match="not found"):
+    with pytest.raises(UserError, match="no such file"):
         load_sweep(tmp_path / "missing.yaml")
 
 

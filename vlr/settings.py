@@ -37,7 +37,8 @@ from vlr.filter import FilterConfig
 from vlr.identify import LoopConfig
 
 __all__ = ["WorldSettings", "Settings", "load_settings", "apply_layer", "build_dataclass",
-           "flatten", "parse_assignment", "settings_help", "DEFAULT_BACKEND"]
+           "flatten", "parse_assignment", "settings_help", "read_yaml_mapping",
+           "DEFAULT_BACKEND"]
 
 DEFAULT_BACKEND = "sim"
 
@@ -314,3 +315,22 @@ def settings_help(settings: Settings | None = None) -> str:
     flat = flatten(settings or Settings())
     width = max(len(k) for k in flat)
     return "\n".join(f"  {k:<{width}}  {v!r}" for k, v in flat.items())
+
+
+def read_yaml_mapping(path, what: str) -> dict:
+    """The YAML mapping in `path` (a settings or sweep file), or one UserError naming `what`
+    and the file: missing, not YAML, or not a mapping."""
+    from pathlib import Path
+
+    import yaml
+
+    where = f"{what} {str(path)!r}"
+    try:
+        raw = yaml.safe_load(Path(path).read_text())
+    except FileNotFoundError:
+        raise UserError(f"{where}: no such file") from None
+    except yaml.YAMLError as exc:
+        raise UserError(f"{where} is not valid YAML: {exc}") from None
+    if not isinstance(raw, dict):
+        raise UserError(f"{where} must be a mapping")
+    return raw

@@ -129,17 +129,10 @@ def parse_seeds(value: Any) -> tuple[int, ...]:
 
 def load_sweep(path: str | Path, out: str | Path | None = None) -> SweepSpec:
     """Read a sweep YAML file (module docstring); `out` overrides its output folder."""
-    import yaml
+    from vlr.settings import read_yaml_mapping
 
     path = Path(path)
-    try:
-        raw = yaml.safe_load(path.read_text())
-    except FileNotFoundError:
-        raise UserError(f"sweep file {str(path)!r} not found") from None
-    except yaml.YAMLError as exc:
-        raise UserError(f"sweep file {str(path)!r} is not valid YAML: {exc}") from None
-    if not isinstance(raw, dict):
-        raise UserError(f"sweep file {str(path)!r} must be a mapping")
+    raw = read_yaml_mapping(path, "sweep file")
     bad = sorted(set(raw) - {"name", "out", "seeds", "settings", "cases", "grid"})
     if bad:
         raise UserError(f"sweep file {str(path)!r}: unknown key(s) {bad}; known: name, out, "

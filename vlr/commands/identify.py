@@ -81,9 +81,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 def settings_from_args(args: argparse.Namespace):
     """The settings tree of `vlr identify`'s arguments: the backend's defaults, the
     --settings file, the flags, then each --set (`vlr.settings.load_settings`)."""
-    from vlr.settings import load_settings, parse_assignment
+    from vlr.settings import load_settings, parse_assignment, read_yaml_mapping
 
-    file_layer = read_settings_file(args.settings) if args.settings else {}
+    file_layer = read_yaml_mapping(args.settings, "--settings") if args.settings else {}
     flags = {"world.backend": args.backend, "world.object": args.object,
              "world.hand": args.hand, "world.true_hand": args.true_hand,
              "filter.particles": args.particles, "seed": args.seed,
@@ -94,23 +94,6 @@ def settings_from_args(args: argparse.Namespace):
         flags["filter.unknowns"] = list(args.unknown)
     sets = dict(parse_assignment(text) for text in args.set)
     return load_settings(file_layer, flags, sets)
-
-
-def read_settings_file(path: str) -> dict:
-    """A YAML mapping of settings (nested or dotted), or a UserError naming the file."""
-    import yaml
-
-    from vlr.errors import UserError
-
-    try:
-        raw = yaml.safe_load(Path(path).read_text())
-    except FileNotFoundError:
-        raise UserError(f"--settings {path!r}: no such file") from None
-    except yaml.YAMLError as exc:
-        raise UserError(f"--settings {path!r} is not valid YAML: {exc}") from None
-    if not isinstance(raw, dict):
-        raise UserError(f"--settings {path!r} must be a mapping of settings")
-    return raw
 
 
 def _open_view(args: argparse.Namespace, seed: int, model, hand_spec, obj_spec, truth):
