@@ -100,7 +100,7 @@ def test_cli_writes_a_tension_section_the_config_accepts(tmp_path, monkeypatch, 
     data = yaml.safe_load(path.read_text())
     data.update(yaml.safe_load(out.read_text()))
     assert load_config(write_config(tmp_path, data, "with_tension.yaml")).tension is not None
-    assert "give --sigma-tension at least" in capsys.readouterr().out
+    assert "give filter.observation.sigma_tension_n at least" in capsys.readouterr().out
 
 
 def test_cli_refuses_pulls_outside_the_motion_range_before_moving(tmp_path, capsys):
