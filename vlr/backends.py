@@ -35,10 +35,11 @@ class Backend:
         name: the name it is registered under (`world.backend`).
         options: the dataclass of its `world.options` (its own settings).
         defaults: {dotted key: value} of the settings tree this world runs best at.
-        open_hand: (world settings, options, seed) -> a `vlr.hand.Hand`, for a backend of
-            hands; the world around it is `vlr.world.hand_world`'s.
-        open_world: (settings, options) -> a `vlr.world.World`, for a world of its own
-            (the synthetic one).
+        open_hand: object=, hand=, seed= and the options' fields as keyword arguments ->
+            a `vlr.hand.Hand`, for a backend of hands; the world around it is
+            `vlr.world.hand_world`'s.
+        open_world: (settings, options, model, obj, nominal, hand_spec, object_spec) -> a
+            `vlr.world.World`, for a world of its own (the synthetic one).
         builds_hand: the world is built from a hand spec, so it can take a `true_hand`
             other than the filter's (not the real hand: it is what it is).
     """
