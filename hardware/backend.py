@@ -8,10 +8,18 @@ Safety, in order of defence:
 * Commands: `check_delta` (finite, one per finger, |delta| <= motion.max_step), then clipping
   to motion.range; moves are ramped; the current is capped (Current Limit, and Goal Current
   in current-based position mode).
+* Every motor of the config, the spread motor included, is read on every ramp step and every
+  settle poll: a hardware error (the alert bit) or a silent motor stops the run.
+* Every move is verified once the motors stop: each motor's Goal Position reads back the
+  value sent (a lost Sync Write is sent again, acknowledged, at most bus.retries times) and
+  its torque is still on. The commands reported (`ApplyReport.commands`) are where the
+  motors are, from their present positions, not where they were sent.
 * Torque is on only while the hand runs. Any exception inside a move (a motor fault, a silent
-  motor, Ctrl-C) switches torque off before it propagates; `close()` switches it off again
-  (a broadcast first, so a motor whose replies are lost still hears it) and is called by the
-  context manager, by `atexit`, and on SIGTERM/SIGHUP (turned into SystemExit).
+  motor, Ctrl-C) switches torque off before it propagates; `close()` checks every motor for a
+  hardware error one last time, switches torque off again (a broadcast first, so a motor
+  whose replies are lost still hears it) and is called by the context manager and by
+  `atexit`. SIGINT, SIGTERM and SIGHUP raise `vlr.errors.Interrupted` (the CLI's one
+  "interrupted" line); later signals are ignored while the run shuts down.
 """
 
 from __future__ import annotations
@@ -39,8 +47,15 @@ from hardware.control_table import (
     OperatingMode,
     Reg,
 )
-from hardware.tendons import TendonMap, read_motion, resolve_zero, wait_until_stopped
+from hardware.tendons import (
+    MotionState,
+    TendonMap,
+    read_motion,
+    resolve_zero,
+    wait_until_stopped,
+)
 from vlr.camera import CameraCalibration
+from vlr.errors import Interrupted
 from vlr.hand import ApplyReport, Frame, GraspError, check_delta
 from vlr.spec import HandSpec, ObjectSpec, load_hand, load_object
 
@@ -85,13 +100,14 @@ class HardwareHand:
         self.bus = MotorBus(port or config.bus.port, config.bus.baud, labels=config.labels,
                             latency_ms=config.bus.latency_ms, retries=config.bus.retries)
         self.tendons: TendonMap | None = None
-        self._u = np.zeros(len(self.finger_ids))
-        atexit.register(self.close)
+        self._u = np.zeros(len(self.finger_ids))  # the commands sent (the goals)
+        self._reached: np.ndarray | None = None  # the commands the motors reached
+        atexit.register(self._release)
         self._install_signal_handlers()
         try:
             self._start()
         except BaseException:
-            self.close()
+            self._release()
             raise
 
     # ----------------------------------------------------------------- Hand interface
@@ -109,7 +125,17 @@ class HardwareHand:
 
     @property
     def commands(self) -> np.ndarray:
+        """The tendon commands sent [m] (the motors' verified goals)."""
         return self._u.copy()
+
+    @property
+    def reached(self) -> np.ndarray:
+        """The tendon commands the motors are at [m], from their present positions after the
+        last move settled (read now if nothing moved yet)."""
+        if self._reached is None:
+            state = read_motion(self.bus, self.finger_ids, CURRENT_UNIT_MA)
+            self._reached = self._commands_at(state)
+        return self._reached.copy()
 
     def grasp(self) -> ApplyReport:
         """Close to the configured grasp commands in steps of at most motion.max_step, settle,
@@ -125,7 +151,7 @@ class HardwareHand:
         if not held:
             raise GraspError(f"no grasp at commands {np.round(self._u * 1e3, 2).tolist()} mm: "
                              f"{message}")
-        return ApplyReport(commands=self.commands, settled=settled, grasp_held=True,
+        return ApplyReport(commands=self.reached, settled=settled, grasp_held=True,
                            tensions=self._tensions())
 
     def apply(self, delta: np.ndarray) -> ApplyReport:
@@ -141,7 +167,7 @@ class HardwareHand:
         with self._guarded():
             settled = self._move_to(target)
         held, message = self._grasp_status()
-        return ApplyReport(commands=self.commands, settled=settled, grasp_held=held,
+        return ApplyReport(commands=self.reached, settled=settled, grasp_held=held,
                            message=message, tensions=self._tensions())
 
     def grab_frame(self) -> Frame | None:
@@ -151,6 +177,22 @@ class HardwareHand:
         return Frame(image=image, stamp=time.monotonic())
 
     def close(self) -> None:
+        """Check every motor for a hardware error one last time (a fault after the last move
+        raises `MotorFaultError` once everything is released, so no run ends as if it had
+        succeeded), then `_release`. Safe to call more than once."""
+        if self._closed:
+            return
+        fault: HardwareError | None = None
+        if self.bus.connected and not self._stopped:
+            try:
+                self.bus.sync_read_one(Reg.HARDWARE_ERROR_STATUS, self.config.ids)
+            except HardwareError as exc:
+                fault = exc
+        self._release()
+        if fault is not None:
+            raise fault
+
+    def _release(self) -> None:
         """Torque off (broadcast, then each motor), close the port, the camera and whatever
         `on_close` holds. Safe to call more than once."""
         if self._closed:
@@ -168,12 +210,14 @@ class HardwareHand:
                 with contextlib.suppress(Exception):
                     fn()
             self._restore_signal_handlers()
-            atexit.unregister(self.close)
+            atexit.unregister(self._release)
 
     def __enter__(self) -> HardwareHand:
         return self
 
-    def __exit__(self, *exc: object) -> None:
+    def __exit__(self, exc_type: object, *exc: object) -> None:
+        if exc_type is not None:
+            self._release()  # an error is on its way out already
         self.close()
 
     # ----------------------------------------------------------------- start-up
@@ -240,6 +284,7 @@ class HardwareHand:
             if cfg.spread is not None:
                 wait_until_stopped(self.bus, [cfg.spread.id], m.settle_timeout, m.settle_ticks,
                                    CURRENT_UNIT_MA)
+                self._settle({cfg.spread.id: cfg.spread.position})
 
     def _torque_on_in_place(self, ids: list[int], mode: OperatingMode) -> None:
         """Torque on without a jump: goal := present position first."""
@@ -250,8 +295,9 @@ class HardwareHand:
 
     # ----------------------------------------------------------------- moving
     def _move_to(self, target: np.ndarray) -> bool:
-        """Ramp the goal positions from the current commands to `target`, then wait until
-        the motors stop. Returns whether they stopped within motion.settle_timeout."""
+        """Ramp the goal positions from the current commands to `target`, wait until the
+        finger motors stop, and verify the move (`_settle`). Every motor is read on every
+        ramp step and poll. Returns whether they stopped within motion.settle_timeout."""
         if self._stopped:
             raise HardwareError(f"the hand was stopped after an error ({self._stopped}); "
                                 "close it and open it again")
@@ -265,13 +311,49 @@ class HardwareHand:
                                 dict(zip(self.finger_ids, self.tendons.ticks(u), strict=True)))
             self._u = u
             # A read per step: its status bytes reveal a motor fault mid-ramp.
-            read_motion(self.bus, self.finger_ids, CURRENT_UNIT_MA)
+            read_motion(self.bus, self.config.ids, CURRENT_UNIT_MA)
             time.sleep(max(0.0, m.ramp_period - (time.monotonic() - t0)))
         self._u = np.asarray(target, dtype=float).copy()
-        settled, state = wait_until_stopped(self.bus, self.finger_ids, m.settle_timeout,
-                                            m.settle_ticks, CURRENT_UNIT_MA)
+        goals = dict(zip(self.finger_ids, self.tendons.ticks(self._u), strict=True))
+        if self.config.spread is not None:
+            goals[self.config.spread.id] = self.config.spread.position
+        settled, state = self._settle(goals)
+        self._reached = self._commands_at(state)
         self._currents = self._pulling_currents(state)
         return settled
+
+    def _settle(self, goals: dict[int, int]) -> tuple[bool, MotionState]:
+        """Wait until the finger motors stop (every motor read), then verify: each motor of
+        `goals` holds that Goal Position (a Sync Write has no reply and may be lost: send it
+        again, acknowledged, at most bus.retries times) and every motor's torque is on."""
+        m, bus = self.config.motion, self.bus
+        others = [i for i in self.config.ids if i not in self.finger_ids]
+        for attempt in range(self.config.bus.retries + 1):
+            settled, state = wait_until_stopped(bus, self.finger_ids, m.settle_timeout,
+                                                m.settle_ticks, CURRENT_UNIT_MA, watch=others)
+            lost = {i: g for i, g in goals.items() if state.goal[i] != g}
+            if not lost:
+                break
+            for dxl_id, goal in lost.items():
+                if attempt == self.config.bus.retries:
+                    raise HardwareError(
+                        f"{bus.label(dxl_id)} holds goal position {state.goal[dxl_id]}, not "
+                        f"the {goal} sent {attempt + 1} times: its writes are lost (check the "
+                        "cable and the baud rate)")
+                self.log(f"{bus.label(dxl_id)} holds goal position {state.goal[dxl_id]}, not "
+                         f"the {goal} sent (a lost write): sending it again")
+                bus.write(Reg.GOAL_POSITION, dxl_id, goal)
+        torque = bus.sync_read_one(Reg.TORQUE_ENABLE, self.config.ids)
+        off = [bus.label(i) for i, on in torque.items() if not on]
+        if off:
+            raise HardwareError(f"{', '.join(off)} switched torque off without a hardware "
+                                "error (a reboot or a supply dip?): check the 12 V supply")
+        return settled, state
+
+    def _commands_at(self, state: MotionState) -> np.ndarray:
+        """The tendon commands [m] at the finger motors' present positions in `state`."""
+        assert self.tendons is not None
+        return self.tendons.commands([state.position[i] for i in self.finger_ids])
 
     def _pulling_currents(self, state) -> np.ndarray:
         """Present currents [mA] per finger, signed by each motor's pulling direction: a
@@ -332,25 +414,38 @@ class HardwareHand:
 
     # ----------------------------------------------------------------- signals
     def _install_signal_handlers(self) -> None:
-        """SIGTERM/SIGHUP -> SystemExit, so `finally` blocks and atexit switch torque off
-        (their default action kills the process with torque still on)."""
+        """SIGINT, SIGTERM and SIGHUP -> `Interrupted`, so `finally` blocks switch torque off
+        and the CLI prints its one line (the default action of SIGTERM and SIGHUP kills the
+        process with torque still on). A handler the program set itself is left alone."""
         if threading.current_thread() is not threading.main_thread():
             return
-        for sig in (signal.SIGTERM, signal.SIGHUP):
-            if signal.getsignal(sig) is signal.SIG_DFL:
-                self._old_signals[sig] = signal.signal(sig, _exit_on_signal)
+        for sig, default in ((signal.SIGINT, signal.default_int_handler),
+                             (signal.SIGTERM, signal.SIG_DFL), (signal.SIGHUP, signal.SIG_DFL)):
+            if signal.getsignal(sig) is default:
+                self._old_signals[sig] = signal.signal(sig, _interrupt)
 
     def _restore_signal_handlers(self) -> None:
+        """Back to the handlers found, unless a signal came: then later ones stay ignored
+        until the process has exited (no second message, no shutdown tracebacks)."""
         if threading.current_thread() is not threading.main_thread():
             return
-        for sig, old in self._old_signals.items():
-            with contextlib.suppress(ValueError, OSError):
-                signal.signal(sig, old)
+        if not _SIGNALLED:
+            for sig, old in self._old_signals.items():
+                with contextlib.suppress(ValueError, OSError):
+                    signal.signal(sig, old)
         self._old_signals.clear()
 
 
-def _exit_on_signal(signum: int, frame: object) -> None:
-    raise SystemExit(128 + signum)
+_SIGNALLED: list[int] = []  # the signal that stopped a hand, if one did
+_HANDLED = (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)
+
+
+def _interrupt(signum: int, frame: object) -> None:
+    """The first signal ends the run (torque off on the way out); later ones are ignored."""
+    for sig in _HANDLED:
+        signal.signal(sig, signal.SIG_IGN)
+    _SIGNALLED.append(signum)
+    raise Interrupted(signum)
 
 
 def open_hand(*, config: str, **ignored: Any) -> HardwareHand:

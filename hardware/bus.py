@@ -13,6 +13,13 @@ Sharp edges of the SDK this class works around (docs: shared/docs/DYNAMIXEL.md):
   the silent motor.
 * Sync writes get no reply: the state is not guaranteed changed when they return; callers
   that need it read it back.
+* The SDK takes the first status packet from the right id as the answer, so a reply that
+  comes after its transaction timed out (a USB or OS stall) would answer the next request.
+  Here a reply must also have the request's shape (its parameter count), and after any
+  failed transaction the next one to that motor is preceded by a marker: a READ of a length
+  no other request uses and no earlier marker used (`_resync`). A motor answers in order, so
+  once the marker's reply is in, every older reply has been read and discarded
+  (`stale_replies` counts them).
 * The SDK never byte-stuffs what it sends, so a payload holding FF FF FD would be mangled by
   the motor: such writes are refused here.
 * A KeyboardInterrupt inside a transaction leaves the SDK's `is_using` flag set, after which
@@ -24,6 +31,7 @@ from __future__ import annotations
 import errno
 import fcntl
 import glob
+import logging
 import os
 import time
 from collections.abc import Iterable, Mapping, Sequence
@@ -37,6 +45,14 @@ from dynamixel_sdk import (
     PacketHandler,
     PortHandler,
 )
+from dynamixel_sdk.protocol2_packet_handler import (
+    PKT_ERROR,
+    PKT_ID,
+    PKT_INSTRUCTION,
+    PKT_LENGTH_H,
+    PKT_LENGTH_L,
+    PKT_PARAMETER0,
+)
 
 from hardware.control_table import (
     ALERT_BIT,
@@ -47,6 +63,16 @@ from hardware.control_table import (
 )
 from hardware.protocol2 import BROADCAST_ID, Instruction
 from vlr.errors import UserError
+
+log = logging.getLogger(__name__)
+
+#: Bytes of a status packet besides its parameters: header 4, id, length 2, instruction,
+#: error, CRC 2.
+STATUS_OVERHEAD = 11
+
+#: The markers of `MotorBus._resync` read this many bytes from address 0, plus a counter
+#: modulo MARKER_LENGTHS: lengths no other request reads, each unlike the last few markers'.
+MARKER_BASE, MARKER_LENGTHS = 40, 16
 
 #: Baud rates the SDK accepts (it refuses others before touching the port).
 SDK_BAUD_RATES = (9_600, 19_200, 38_400, 57_600, 115_200, 230_400, 460_800, 500_000, 576_000,
@@ -129,6 +155,10 @@ class MotorBus:
         self.retries = retries
         self.packet = PacketHandler(2.0)
         self.port: _PortHandler | None = None
+        self.stale_replies = 0  # status packets read and discarded as not the answer
+        # Motors whose last transaction failed: a late reply of theirs may still come.
+        self._unsynced: set[int] = set()
+        self._markers = 0
 
     # ----------------------------------------------------------------- connection
     def connect(self) -> None:
@@ -204,11 +234,73 @@ class MotorBus:
         ids = [ids] if isinstance(ids, int) else list(ids)
         result = COMM_SUCCESS
         for _ in range(self.retries + 1):
+            self._resync(ids, what)
             result, value = attempt()
             if result == COMM_SUCCESS:
                 return value
+            log.info("%s: %s failed (%s); trying again", self.port_name, what,
+                     self.packet.getTxRxResult(result))
+            self._unsynced.update(ids)
             self.recover()
         raise CommError(self._comm_message(what, ids, result), ids)
+
+    def _resync(self, ids: Sequence[int], what: str) -> None:
+        """Before talking to a motor whose last transaction failed: send it a marker READ
+        and take only the marker's reply (module docstring), so that no late reply answers
+        a later request. Each try uses a new length: a late marker reply is no answer to the
+        next marker either."""
+        for dxl_id in ids:
+            if dxl_id not in self._unsynced:
+                continue
+            result = COMM_SUCCESS
+            for _ in range(self.retries + 1):
+                self._markers += 1
+                n = MARKER_BASE + self._markers % MARKER_LENGTHS
+                result, _, _ = self._send(dxl_id, Instruction.READ, (0, 0, n, 0), n)
+                if result == COMM_SUCCESS:
+                    self._unsynced.discard(dxl_id)
+                    break
+                self.recover()
+            else:
+                raise CommError(self._comm_message(what, [dxl_id], result), [dxl_id])
+
+    def _receive(self, dxl_id: int, n_data: int) -> tuple[int, bytes, int]:
+        """(result, data, error byte) of the status packet answering the request just sent
+        to `dxl_id`: from that id, with `n_data` parameter bytes. Any other packet (a late
+        reply to an earlier request) is discarded, until the packet timeout."""
+        port = self._port()
+        while True:
+            rx, result = self.packet.rxPacket(port, False)
+            if result != COMM_SUCCESS:
+                return result, b"", 0
+            n = len(rx) - STATUS_OVERHEAD
+            if rx[PKT_ID] == dxl_id and n == n_data:
+                start = PKT_PARAMETER0 + 1
+                return result, bytes(rx[start:start + n_data]), rx[PKT_ERROR]
+            self.stale_replies += 1
+            log.debug("%s: discarded a status packet from id %d with %d bytes (awaiting id %d, "
+                      "%d bytes)", self.port_name, rx[PKT_ID], n, dxl_id, n_data)
+
+    def _send(self, dxl_id: int, instruction: int, params: Sequence[int] = (),
+              n_reply: int = 0) -> tuple[int, bytes, int]:
+        """One instruction packet to `dxl_id` and its matched reply (`_receive`)."""
+        port = self._port()
+        tx = [0] * (10 + len(params))
+        tx[PKT_ID] = dxl_id
+        tx[PKT_LENGTH_L], tx[PKT_LENGTH_H] = (len(params) + 3) & 0xFF, (len(params) + 3) >> 8
+        tx[PKT_INSTRUCTION] = instruction
+        tx[PKT_PARAMETER0:PKT_PARAMETER0 + len(params)] = list(params)
+        result = self.packet.txPacket(port, tx)
+        if result != COMM_SUCCESS:
+            port.is_using = False
+            return result, b"", 0
+        port.setPacketTimeout(STATUS_OVERHEAD + n_reply)
+        return self._receive(dxl_id, n_reply)
+
+    def _ping_once(self, dxl_id: int) -> tuple[int, tuple[int, int]]:
+        result, data, error = self._send(dxl_id, Instruction.PING, (), 3)
+        model = data[0] | (data[1] << 8) if result == COMM_SUCCESS else 0
+        return result, (model, error)
 
     def _comm_message(self, what: str, ids: Sequence[int], result: int) -> str:
         who = ", ".join(self.label(i) for i in ids)
@@ -239,10 +331,7 @@ class MotorBus:
     # ----------------------------------------------------------------- transactions
     def ping(self, dxl_id: int) -> int:
         """The model number of `dxl_id`; `CommError` naming the id if it does not answer."""
-        def attempt():
-            model, result, error = self.packet.ping(self._port(), dxl_id)
-            return result, (model, error)
-        model, error = self._retry("ping", dxl_id, attempt)
+        model, error = self._retry("ping", dxl_id, lambda: self._ping_once(dxl_id))
         self.check_status(dxl_id, error, "ping")
         return model
 
@@ -251,11 +340,11 @@ class MotorBus:
 
     def read_raw(self, address: int, length: int, dxl_id: int) -> tuple[bytes, int]:
         """(data, status error byte) of a READ, with retries; the error byte is NOT checked."""
+        params = (address & 0xFF, address >> 8, length & 0xFF, length >> 8)
+
         def attempt():
-            data, result, error = self.packet.readTxRx(self._port(), dxl_id, address, length)
-            if result == COMM_SUCCESS and len(data) != length:
-                result = COMM_RX_CORRUPT
-            return result, (bytes(data), error)
+            result, data, error = self._send(dxl_id, Instruction.READ, params, length)
+            return result, (data, error)
         return self._retry(f"read {length} bytes at {address}", dxl_id, attempt)
 
     def read(self, reg: Reg, dxl_id: int) -> int:
@@ -274,9 +363,10 @@ class MotorBus:
         """Write one register of one motor and wait for its status."""
         data = _payload(reg, value, Instruction.WRITE)
 
+        params = (reg.address & 0xFF, reg.address >> 8, *data)
+
         def attempt():
-            result, error = self.packet.writeTxRx(self._port(), dxl_id, reg.address, reg.size,
-                                                  list(data))
+            result, _, error = self._send(dxl_id, Instruction.WRITE, params)
             return result, error
         error = self._retry(f"write of {reg.name.lower()}={value}", dxl_id, attempt)
         if not check_alert:
@@ -318,16 +408,19 @@ class MotorBus:
     def _sync_read_once(self, start: int, length: int,
                         ids: Sequence[int]) -> dict[int, tuple[bytes, int]] | None:
         port = self._port()
+        self._resync(ids, "sync read")
         result = self.packet.syncReadTx(port, start, length, list(ids), len(ids), False)
         if result != COMM_SUCCESS:
+            port.is_using = False
             return None
         replies = {}
-        for dxl_id in ids:
-            data, result, error = self.packet.readRx(port, dxl_id, length)
-            if result != COMM_SUCCESS or len(data) != length:
+        for k, dxl_id in enumerate(ids):
+            result, data, error = self._receive(dxl_id, length)
+            if result != COMM_SUCCESS:
                 port.is_using = False
+                self._unsynced.update(ids[k:])  # their replies may still be on the way
                 return None
-            replies[dxl_id] = (bytes(data), error)
+            replies[dxl_id] = (data, error)
         return replies
 
     def sync_read_one(self, reg: Reg, ids: Sequence[int]) -> dict[int, int]:
@@ -364,7 +457,7 @@ class MotorBus:
     def reboot(self, dxl_id: int) -> None:
         """REBOOT a motor (clears a hardware error; torque comes back off)."""
         def attempt():
-            result, error = self.packet.reboot(self._port(), dxl_id)
+            result, _, error = self._send(dxl_id, Instruction.REBOOT)
             return result, error
         self._retry("reboot", dxl_id, attempt)
 

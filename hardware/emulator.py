@@ -10,8 +10,11 @@ PING (also broadcast), READ, WRITE, SYNC_READ, SYNC_WRITE, BULK_READ, REBOOT; a 
 per motor (`hardware.control_table.Reg`); EEPROM (addresses < 64) not writable with torque on
 (access error 7); present position moving towards the goal at a bounded rate, so a master
 really has to wait; a load model (`KinematicPlant`); and faults to inject: a motor that stops
-answering, corrupted replies (bad CRC), and hardware errors (e.g. overload, bit 5 of register
-70), which switch torque off and set the alert bit 0x80 in every status until REBOOT.
+answering, corrupted replies (bad CRC), replies that leave late (a USB or OS stall: the bytes
+behind them wait too, in order), instructions lost on the wire (noise: the motor neither acts
+nor answers), and hardware errors (e.g. overload, bit 5 of register 70), now or after a number
+of served packets, which switch torque off and set the alert bit 0x80 in every status until
+REBOOT.
 
 Multi-turn position is lost on REBOOT, as on the real motor: present position then reads
 within one turn (0..4095). Plants see the continuous `shaft` angle, which a reboot does not
@@ -22,6 +25,7 @@ from __future__ import annotations
 
 import math
 import os
+import random
 import select
 import threading
 import time
@@ -87,10 +91,25 @@ class Faults:
         silent: the motor sends no status packets (a broken return line, a flaky
             connector); it still executes what it hears, so a broadcast can still reach it.
         corrupt_replies: the next N status packets carry a bad CRC; -1 means all of them.
+        reply_delay: each status packet leaves this late [s]; what the emulator sends after
+            it waits behind it (a stall delays the line, it does not reorder it).
+        late_replies: how many replies `reply_delay` holds back; -1 means all of them.
+        drop_share: the share of instruction packets the motor never receives (its part of
+            a sync write included); drawn from the emulator's seeded generator.
+        drop_only: the instructions `drop_share` applies to (None: all of them).
+        fault_after: raise `fault_bits` once the emulator has served this many packets in
+            all (None: never); a fault in the middle of a run.
+        fault_bits: the Hardware Error Status bits of that fault.
     """
 
     silent: bool = False
     corrupt_replies: int = 0
+    reply_delay: float = 0.0
+    late_replies: int = -1
+    drop_share: float = 0.0
+    drop_only: frozenset[int] | None = None
+    fault_after: int | None = None
+    fault_bits: int = 0
 
 
 class EmulatedMotor:
@@ -308,10 +327,12 @@ class Emulator:
         plant: what moves them (default: a `KinematicPlant` without load).
         shafts: initial shaft angles [ticks] per id (default 2048: mid-turn).
         tick: period of the motion update when the bus is idle [s].
+        seed: seeds the draws of lost instructions (`drop_instructions`).
     """
 
     def __init__(self, ids: Iterable[int], plant: MotorPlant | None = None,
-                 shafts: Mapping[int, float] | None = None, tick: float = 0.002) -> None:
+                 shafts: Mapping[int, float] | None = None, tick: float = 0.002,
+                 seed: int = 0) -> None:
         shafts = shafts or {}
         self.motors: dict[int, EmulatedMotor] = {
             i: EmulatedMotor(i, shafts.get(i, 2048.0)) for i in ids}
@@ -319,6 +340,10 @@ class Emulator:
         self.tick = tick
         self.lock = threading.RLock()
         self.packets_served = 0
+        self.dropped = 0  # instruction packets lost on the wire (`drop_instructions`)
+        self._rng = random.Random(seed)
+        self._late: list[tuple[float, bytes]] = []  # (when, bytes) waiting to be sent
+        self._line_free = 0.0  # when the last queued bytes leave: later ones go after them
         self._parser = PacketParser()
         self._master = self._slave = -1
         self._thread: threading.Thread | None = None
@@ -379,17 +404,41 @@ class Emulator:
         with self.lock:
             self.motors[dxl_id].faults.corrupt_replies = count
 
-    def inject_hardware_error(self, dxl_id: int,
-                              bits: int = HardwareError.OVERLOAD) -> None:
-        """Raise a hardware error on a motor (default: overload, bit 5 of register 70)."""
+    def inject_hardware_error(self, dxl_id: int, bits: int = HardwareError.OVERLOAD,
+                              after_packets: int | None = None) -> None:
+        """Raise a hardware error on a motor (default: overload, bit 5 of register 70): now,
+        or once `after_packets` more packets have been served."""
         with self.lock:
-            self.motors[dxl_id].fault(int(bits))
+            m = self.motors[dxl_id]
+            if after_packets is None:
+                m.fault(int(bits))
+            else:
+                m.faults.fault_after = self.packets_served + after_packets
+                m.faults.fault_bits = int(bits)
+
+    def delay_replies(self, dxl_id: int, seconds: float, count: int = -1) -> None:
+        """Send a motor's next `count` replies (-1: all) `seconds` late, in order."""
+        with self.lock:
+            f = self.motors[dxl_id].faults
+            f.reply_delay, f.late_replies = seconds, count
+
+    def drop_instructions(self, dxl_id: int, share: float,
+                          only: Iterable[int] | None = None) -> None:
+        """Lose this share of the instruction packets meant for a motor (`only`: of these
+        instructions, e.g. `Instruction.SYNC_WRITE`)."""
+        with self.lock:
+            f = self.motors[dxl_id].faults
+            f.drop_share = share
+            f.drop_only = None if only is None else frozenset(int(i) for i in only)
 
     # ----------------------------------------------------------------- serving
     def _serve(self) -> None:
         while not self._stop.is_set():
+            wait = self.tick
+            if self._late:
+                wait = max(0.0, min(wait, self._late[0][0] - time.monotonic()))
             try:
-                ready, _, _ = select.select([self._master], [], [], self.tick)
+                ready, _, _ = select.select([self._master], [], [], wait)
             except (OSError, ValueError):
                 return
             data = b""
@@ -400,14 +449,50 @@ class Emulator:
                     time.sleep(self.tick)
             with self.lock:
                 self._advance()
+                self._send_due()
                 for packet in self._parser.feed(data) if data else ():
                     reply = self._handle(packet)
                     self.packets_served += 1
+                    self._scheduled_faults()
                     if reply:
-                        try:
-                            os.write(self._master, reply)
-                        except OSError:
-                            pass
+                        self._send(reply)
+
+    def _send(self, reply: bytes, when: float = 0.0) -> None:
+        """Send now, or queue until `when`; bytes never overtake bytes queued before them."""
+        if when <= time.monotonic() and not self._late:
+            self._write(reply)
+            return
+        when = max(when, self._line_free)
+        self._line_free = when
+        self._late.append((when, reply))
+
+    def _send_due(self) -> None:
+        now = time.monotonic()
+        while self._late and self._late[0][0] <= now:
+            self._write(self._late.pop(0)[1])
+
+    def _write(self, data: bytes) -> None:
+        try:
+            os.write(self._master, data)
+        except OSError:
+            pass
+
+    def _scheduled_faults(self) -> None:
+        for m in self.motors.values():
+            f = m.faults
+            if f.fault_after is not None and self.packets_served >= f.fault_after:
+                m.fault(f.fault_bits)
+                f.fault_after = None
+
+    def _lost(self, m: EmulatedMotor, instruction: int) -> bool:
+        """Whether this instruction packet never reaches motor `m` (`drop_instructions`)."""
+        f = m.faults
+        if f.drop_share <= 0.0 or (f.drop_only is not None and instruction not in f.drop_only):
+            return False
+        if self._rng.random() < f.drop_share:
+            self.dropped += 1
+            return True
+        return False
 
     def _advance(self) -> None:
         now = time.monotonic()
@@ -416,21 +501,32 @@ class Emulator:
             self.plant.step(self.motors, dt)
 
     def _status(self, m: EmulatedMotor, number: int = 0, params: bytes = b"") -> bytes:
-        """One motor's status packet, or b"" if the motor is silent."""
-        if m.faults.silent:
+        """One motor's status packet, or b"" if the motor is silent or its reply is late
+        (then it is queued, `_send`)."""
+        f = m.faults
+        if f.silent:
             return b""
         packet = encode_status(m.dxl_id, m.error_byte(number), params)
-        if m.faults.corrupt_replies:
-            if m.faults.corrupt_replies > 0:
-                m.faults.corrupt_replies -= 1
+        if f.corrupt_replies:
+            if f.corrupt_replies > 0:
+                f.corrupt_replies -= 1
             packet = packet[:-1] + bytes([packet[-1] ^ 0xFF])
+        if f.reply_delay > 0 and f.late_replies != 0:
+            if f.late_replies > 0:
+                f.late_replies -= 1
+            self._send(packet, time.monotonic() + f.reply_delay)
+            return b""
+        if self._late:  # the line is stalled: wait behind what is queued
+            self._send(packet, time.monotonic())
+            return b""
         return packet
 
-    def _targets(self, dxl_id: int) -> list[EmulatedMotor]:
+    def _targets(self, dxl_id: int, instruction: int) -> list[EmulatedMotor]:
         if dxl_id == BROADCAST_ID:
-            return [self.motors[i] for i in sorted(self.motors)]
+            return [self.motors[i] for i in sorted(self.motors)
+                    if not self._lost(self.motors[i], instruction)]
         m = self._by_id(dxl_id)
-        return [m] if m else []
+        return [m] if m and not self._lost(m, instruction) else []
 
     def _by_id(self, dxl_id: int) -> EmulatedMotor | None:
         for m in self.motors.values():
@@ -439,7 +535,7 @@ class Emulator:
         return None
 
     def _handle(self, p: Packet) -> bytes:
-        targets = self._targets(p.dxl_id)
+        targets = self._targets(p.dxl_id, p.instruction)
         unicast = p.dxl_id != BROADCAST_ID
         if not p.crc_ok:
             return self._status(targets[0], ERR_CRC) if unicast and targets else b""
@@ -470,7 +566,7 @@ class Emulator:
             out = []
             for dxl_id in params[4:]:
                 m = self._by_id(dxl_id)
-                if m is not None:
+                if m is not None and m in targets:
                     number, data = m.read(address, length)
                     out.append(self._status(m, number, data))
             return b"".join(out)
@@ -479,14 +575,14 @@ class Emulator:
             body = params[4:]
             for k in range(0, len(body) - length, length + 1):
                 m = self._by_id(body[k])
-                if m is not None:
+                if m is not None and m in targets:
                     m.write(address, body[k + 1: k + 1 + length])  # no status: broadcast
             return b""
         if inst == Instruction.BULK_READ and not unicast:
             out = []
             for k in range(0, len(params) - 4, 5):
                 m = self._by_id(params[k])
-                if m is not None:
+                if m is not None and m in targets:
                     number, data = m.read(_u16(params, k + 1), _u16(params, k + 3))
                     out.append(self._status(m, number, data))
             return b"".join(out)

@@ -74,20 +74,25 @@ def resolve_zero(stored: int, present: int, direction: int, spool_radius: float,
 
 @dataclass(frozen=True)
 class MotionState:
-    """One reading of the moving motors: per id, Moving (122), current [mA], position."""
+    """One reading of the motors: per id, Goal Position (116), Moving (122), current [mA],
+    Present Position (132)."""
 
+    goal: dict[int, int]
     moving: dict[int, bool]
     current_ma: dict[int, float]
     position: dict[int, int]
 
 
-MOTION_REGS = (Reg.MOVING, Reg.PRESENT_CURRENT, Reg.PRESENT_POSITION)
+MOTION_REGS = (Reg.GOAL_POSITION, Reg.MOVING, Reg.PRESENT_CURRENT, Reg.PRESENT_POSITION)
 
 
 def read_motion(bus: MotorBus, ids: Sequence[int], current_unit_ma: float) -> MotionState:
-    """Moving, present current and present position of `ids`, in one sync read (122..135)."""
+    """Goal, Moving, present current and present position of `ids`, in one sync read
+    (116..135). Every reply's status byte is checked (`MotorBus.check_status`), so a fault
+    on any motor read raises."""
     values = bus.sync_read(MOTION_REGS, ids)
     return MotionState(
+        goal={i: v[Reg.GOAL_POSITION] for i, v in values.items()},
         moving={i: bool(v[Reg.MOVING]) for i, v in values.items()},
         current_ma={i: v[Reg.PRESENT_CURRENT] * current_unit_ma for i, v in values.items()},
         position={i: v[Reg.PRESENT_POSITION] for i, v in values.items()},
@@ -95,8 +100,10 @@ def read_motion(bus: MotorBus, ids: Sequence[int], current_unit_ma: float) -> Mo
 
 
 def wait_until_stopped(bus: MotorBus, ids: Sequence[int], timeout: float, settle_ticks: int,
-                       current_unit_ma: float, period: float = 0.005) -> tuple[bool, MotionState]:
-    """Poll until every motor has stopped, at most `timeout` seconds.
+                       current_unit_ma: float, period: float = 0.005,
+                       watch: Sequence[int] = ()) -> tuple[bool, MotionState]:
+    """Poll until every motor of `ids` has stopped, at most `timeout` seconds; the motors of
+    `watch` are read with them (their status bytes checked) but not waited for.
 
     Stopped means Moving (122) is 0 AND the position changed by at most `settle_ticks` since
     the previous reading. Both, because a sync write has no reply: right after it a motor may
@@ -107,10 +114,11 @@ def wait_until_stopped(bus: MotorBus, ids: Sequence[int], timeout: float, settle
     Returns (stopped, last reading).
     """
     deadline = time.monotonic() + timeout
-    previous = read_motion(bus, ids, current_unit_ma)
+    read = list(ids) + [i for i in watch if i not in ids]
+    previous = read_motion(bus, read, current_unit_ma)
     while True:
         time.sleep(period)
-        state = read_motion(bus, ids, current_unit_ma)
+        state = read_motion(bus, read, current_unit_ma)
         still = all(not state.moving[i] and abs(state.position[i] - previous.position[i])
                     <= settle_ticks for i in ids)
         if still:

@@ -298,7 +298,11 @@ class HandTaskEnv(gym.Env):
         if not getattr(report, "grasp_held", True):
             self.grasp_lost = True
             self.grasp_message = str(getattr(report, "message", ""))
-        u = self._u = np.asarray(report.commands, dtype=float).copy()
+        # The task steers by the commands it sent; the filter sees the commands the motors
+        # reached (the same in the sim; on the real hand within a tick of them, or short of
+        # a stalled goal).
+        self._u = np.asarray(self.hand.commands, dtype=float).copy()
+        u = np.asarray(report.commands, dtype=float).copy()
         obs = self._observe()
         self.moves.append(Move(u, obs))
         if obs is not None:

@@ -66,11 +66,15 @@ def test_moves_follow_the_spool_math(tmp_path):
         # Stored zeros are known modulo a turn: 5000 reads as 904 after a power-up.
         assert hand.tendons.zeros == (2300, 904, 2200)
         report = hand.grasp()
-        np.testing.assert_allclose(report.commands, [0.004, 0.003, 0.003])
+        # Sent: the commands; reported: where the motors are, within a tick of them.
+        np.testing.assert_allclose(hand.commands, [0.004, 0.003, 0.003])
+        np.testing.assert_allclose(report.commands, [0.004, 0.003, 0.003],
+                                   atol=1.01 / PER_METRE)
         report = hand.apply(np.array([0.001, -0.0005, 0.002]))
         assert report.settled and report.grasp_held
         u = np.array([0.005, 0.0025, 0.005])
-        np.testing.assert_allclose(report.commands, u)
+        np.testing.assert_allclose(hand.commands, u)
+        np.testing.assert_allclose(report.commands, u, atol=1.01 / PER_METRE)
         expected = {1: round(2300 + u[0] * PER_METRE), 2: round(904 - u[1] * PER_METRE),
                     3: round(2200 + u[2] * PER_METRE)}
         for dxl_id, ticks in expected.items():
@@ -93,7 +97,8 @@ def test_bad_commands_are_refused_and_the_range_clips(tmp_path):
         with pytest.raises(CommandError, match="shape"):
             hand.apply(np.zeros(2))
         report = hand.apply(np.array([-0.001, 0.001, 0.0]))  # thumb would go below 0
-        np.testing.assert_allclose(report.commands, [0.0, 0.001, 0.0])
+        np.testing.assert_allclose(hand.commands, [0.0, 0.001, 0.0])
+        np.testing.assert_allclose(report.commands, [0.0, 0.001, 0.0], atol=1.01 / PER_METRE)
     assert all_off(emu)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
 from importlib.metadata import entry_points
 
@@ -55,9 +56,9 @@ def main(argv: list[str] | None = None) -> int:
     except (UserError, SpecError, FileNotFoundError, GraspError, CommandError) as exc:
         print(f"vlr {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as exc:  # Ctrl-C, or SIGTERM/SIGHUP on the real hand
         print(f"vlr {args.command}: interrupted", file=sys.stderr)
-        return 130
+        return 128 + getattr(exc, "signum", signal.SIGINT)
 
 
 if __name__ == "__main__":
