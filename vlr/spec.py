@@ -25,10 +25,12 @@ Lengths are metres, angles radians, masses kilograms, stiffnesses N m/rad and N/
 
 from __future__ import annotations
 
+import difflib
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 import yaml
@@ -154,6 +156,9 @@ class HandSpec:
         _require(len(self.mounts) >= 1, f"hand {self.name}: needs at least one finger")
         _require(self.tendon_stiffness > 0, f"hand {self.name}: tendon_stiffness "
                  f"{self.tendon_stiffness} must be > 0")
+        _require(self.palm_radius > 0 and self.palm_thickness > 0, f"hand {self.name}: "
+                 f"palm_radius {self.palm_radius} and palm_thickness {self.palm_thickness} "
+                 "must be > 0")
         slots = [m.slot for m in self.mounts]
         _require(len(set(slots)) == len(slots), f"hand {self.name}: duplicate slots {slots}")
 
@@ -250,90 +255,185 @@ def _read_yaml(path: Path) -> dict[str, Any]:
     return load_yaml_mapping(path, "spec file")
 
 
-def _get(data: dict[str, Any], key: str, path: Path, kind: type | tuple = (int, float),
-         length: int | None = None) -> Any:
-    if key not in data:
-        raise SpecError(f"{path}: missing key {key!r}")
-    value = data[key]
-    if length is None:
-        if not isinstance(value, kind) or isinstance(value, bool):
-            noun = {str: "a string", int: "an integer"}.get(kind, "a number")
-            raise SpecError(f"{path}: {key} = {value!r} must be {noun}")
-        if isinstance(value, (int, float)) and not math.isfinite(value):
-            raise SpecError(f"{path}: {key} = {value!r} must be finite")
+# The keys each mapping of a spec file accepts (models/README.md describes them).
+_FINGER_KEYS = ("name", "proximal_length", "distal_length", "pad_center", "pad_radius",
+                "pulley_radii", "stiffness", "rest_angles", "limits", "link_masses",
+                "link_coms", "link_width", "meshes")
+_MESH_KEYS = ("proximal_visual", "distal_visual", "proximal_collision", "distal_collision")
+_HAND_KEYS = ("name", "tendon_stiffness", "spread", "palm_radius", "palm_thickness", "slots")
+_SLOT_KEYS = ("slot", "position", "yaw", "finger")
+_OBJECT_KEYS = ("name", "ycb", "shape", "size", "mass", "com", "tag_id", "tag_size",
+                "grasp_height", "friction", "rgba", "mesh", "extras")
+# An object's `extras` are read by the scene builders (sim/model.py, sim/scenes.py), most
+# with a default, so they are declared here too: a misspelt one would silently build the
+# default shape. A new builder that reads a new extra adds it here.
+_EXTRA_FLAGS = ("upright", "horizontal")
+_EXTRA_NUMBERS = ("taper_deg", "wall", "bottom",                        # nesting cups
+                  "shaft_radius", "shaft_length",                       # screwdriver
+                  "stem_radius", "stem_length", "foot_radius", "foot_thickness",  # glass
+                  "post_radius", "post_height", "plate_half", "plate_thickness",  # maze
+                  "wall_height", "wall_thickness", "plate_tilt_deg", "marble_radius",
+                  "marble_mass", "handle_mass", "post_mass", "plate_mass")
+# Shape -> (number of `size` entries, what they are), as sim/model.py builds each shape.
+_SIZES = {"sphere": (1, "radius"), "cylinder": (2, "radius, half-height"),
+          "box": (3, "half-extents x, y, z"), "mesh": (3, "bounding half-extents x, y, z")}
+_MISSING: Any = object()
+
+
+def _is_number(value: Any) -> bool:
+    # YAML's true/false are ints to Python; in a spec they are never meant as numbers.
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+class _Section:
+    """One mapping of a spec file, with the keys it accepts declared up front.
+
+    Every mapping of a finger, hand or object file (and their meshes, slots, extras) is read
+    through this class, so that each refuses an unknown key or a value of the wrong type the
+    same way: with one line naming the file, the key (dotted for nested keys, e.g.
+    `slots[0].finger.pad_center`) and what is accepted there.
+    """
+
+    def __init__(self, data: Any, path: Path, where: str, accepted: Sequence[str]) -> None:
+        self.path, self.where, self.accepted = path, where, tuple(accepted)
+        if not isinstance(data, dict):
+            self.fail(where or "the file", data, "must be a mapping")
+        self.data: dict[Any, Any] = data
+        # Keys before values: a misspelt required key is then named as misspelt, with the
+        # key it resembles, rather than the correct one reported missing.
+        for key in data:
+            if key not in self.accepted:
+                self._unknown(str(key))
+
+    def key(self, name: str) -> str:
+        """The dotted key of `name` in this section."""
+        return f"{self.where}.{name}" if self.where else name
+
+    def fail(self, key: str, value: Any, why: str) -> NoReturn:
+        raise SpecError(f"{self.path}: {key} = {value!r} {why}")
+
+    def _unknown(self, name: str) -> NoReturn:
+        close = difflib.get_close_matches(name, self.accepted, n=1)
+        hint = f" (did you mean {self.key(close[0])!r}?)" if close else ""
+        scope = f" in {self.where}" if self.where else ""
+        raise SpecError(f"{self.path}: unknown key {self.key(name)!r}{hint}; "
+                        f"accepted{scope}: {', '.join(sorted(self.accepted))}")
+
+    def value(self, name: str, default: Any = _MISSING) -> Any:
+        """The raw value of `name`, `default` when absent (required when no default)."""
+        if name not in self.data:
+            if default is _MISSING:
+                raise SpecError(f"{self.path}: missing key {self.key(name)!r}")
+            return default
+        return self.data[name]
+
+    def number(self, name: str, default: Any = _MISSING) -> float:
+        """A finite number."""
+        value = self.value(name, default)
+        if not _is_number(value):
+            self.fail(self.key(name), value, "must be a number")
+        if not math.isfinite(value):
+            self.fail(self.key(name), value, "must be finite")
+        return float(value)
+
+    def integer(self, name: str, default: Any = _MISSING, allow_none: bool = False) -> int | None:
+        """An integer (or None, if `allow_none` and the key is absent or null)."""
+        value = self.value(name, default)
+        if value is None and allow_none:
+            return None
+        if not isinstance(value, int) or isinstance(value, bool):
+            self.fail(self.key(name), value, "must be an integer")
         return value
-    if not isinstance(value, (list, tuple)) or len(value) != length:
-        raise SpecError(f"{path}: {key} = {value!r} must be a list of {length}")
-    return value
+
+    def string(self, name: str, default: Any = _MISSING, choices: Sequence[str] = ()) -> str:
+        """A non-empty string, one of `choices` when given."""
+        value = self.value(name, default)
+        if not isinstance(value, str) or not value:
+            self.fail(self.key(name), value, "must be a non-empty string")
+        if choices and value not in choices:
+            self.fail(self.key(name), value, f"must be one of {', '.join(choices)}")
+        return value
+
+    def flag(self, name: str, default: Any = _MISSING) -> bool:
+        """true or false."""
+        value = self.value(name, default)
+        if not isinstance(value, bool):
+            self.fail(self.key(name), value, "must be true or false")
+        return value
+
+    def numbers(self, name: str, n: int, default: Any = _MISSING,
+                what: str = "") -> tuple[float, ...]:
+        """A list of `n` finite numbers; `what` says what they are, for the message."""
+        return _numbers(self.value(name, default), n, self.path, self.key(name), what)
+
+    def pairs(self, name: str, count: int, n: int) -> tuple[tuple[float, ...], ...]:
+        """A list of `count` lists of `n` finite numbers (joint limits, link centres)."""
+        value = self.value(name)
+        if not isinstance(value, (list, tuple)) or len(value) != count:
+            self.fail(self.key(name), value, f"must be a list of {count} lists of {n} numbers")
+        return tuple(_numbers(v, n, self.path, f"{self.key(name)}[{j}]")
+                     for j, v in enumerate(value))
+
+    def section(self, name: str, accepted: Sequence[str]) -> _Section:
+        """An optional nested mapping (empty when absent or null)."""
+        value = self.value(name, None)
+        return _Section({} if value is None else value, self.path, self.key(name), accepted)
+
+    def mesh(self, name: str) -> str | None:
+        """An optional mesh file path, relative to the spec file; absolute when resolved."""
+        entry = self.value(name, None)
+        if entry is None:
+            return None
+        if not isinstance(entry, str) or not entry:
+            self.fail(self.key(name), entry, "must be a file path")
+        p = Path(entry)
+        if not p.is_absolute():
+            p = (self.path.parent / p).resolve()
+        if not p.is_file():
+            raise SpecError(f"{self.path}: {self.key(name)} = {entry!r}: mesh file {p} does "
+                            "not exist")
+        return str(p)
 
 
-def _opt_number(data: dict[str, Any], key: str, default: float, path: Path) -> float:
-    """An optional finite number (`default` when absent)."""
-    return float(_get(data, key, path)) if key in data else default
+def _numbers(value: Any, n: int, path: Path, key: str, what: str = "") -> tuple[float, ...]:
+    """`value` as `n` finite floats, or a SpecError naming `path` and `key`."""
+    if (not isinstance(value, (list, tuple)) or len(value) != n
+            or not all(_is_number(v) for v in value)):
+        noun = "number" if n == 1 else "numbers"
+        raise SpecError(f"{path}: {key} = {value!r} must be a list of {n} {noun}"
+                        + (f" ({what})" if what else ""))
+    if not all(math.isfinite(v) for v in value):
+        raise SpecError(f"{path}: {key} = {value!r} must hold finite numbers")
+    return tuple(float(v) for v in value)
 
 
-def _opt_mapping(data: dict[str, Any], key: str, path: Path) -> dict[str, Any]:
-    """An optional mapping ({} when absent or empty)."""
-    value = data.get(key) or {}
-    if not isinstance(value, dict):
-        raise SpecError(f"{path}: {key} = {value!r} must be a mapping")
-    return value
+def finger_from_dict(data: dict[str, Any], path: Path, where: str = "") -> FingerSpec:
+    """Build a FingerSpec from a parsed YAML mapping (see models/README.md for the format).
 
-
-def _vec(value: Any, n: int, where: str) -> tuple[float, ...]:
-    if not isinstance(value, (list, tuple)) or len(value) != n:
-        raise SpecError(f"{where} = {value!r} must be a list of {n} numbers")
-    out = []
-    for v in value:
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise SpecError(f"{where} = {value!r} must hold finite numbers")
-        out.append(float(v))
-    return tuple(out)
-
-
-def _resolve_mesh(entry: Any, base: Path, where: str) -> str | None:
-    if entry is None:
-        return None
-    if not isinstance(entry, str):
-        raise SpecError(f"{where}: mesh {entry!r} must be a file path")
-    p = Path(entry)
-    if not p.is_absolute():
-        p = (base / p).resolve()
-    if not p.is_file():
-        raise SpecError(f"{where}: mesh file {p} does not exist")
-    return str(p)
-
-
-def finger_from_dict(data: dict[str, Any], path: Path) -> FingerSpec:
-    """Build a FingerSpec from a parsed YAML mapping (see models/README.md for the format)."""
-    base = path.parent
-    where = str(path)
-    limits = _get(data, "limits", path, length=2)
-    meshes = _opt_mapping(data, "meshes", path)
+    `where` is the mapping's dotted key in `path` ("" for a finger file, e.g. `slots[0].finger`
+    for a finger defined inline in a hand file), for the messages.
+    """
+    s = _Section(data, path, where, _FINGER_KEYS)
+    meshes = s.section("meshes", _MESH_KEYS)
+    limits = s.pairs("limits", 2, 2)
+    link_coms = s.pairs("link_coms", 2, 3)
     try:
         return FingerSpec(
-            name=str(data.get("name", path.stem)),
-            proximal_length=float(_get(data, "proximal_length", path)),
-            distal_length=float(_get(data, "distal_length", path)),
-            pad_center=_vec(_get(data, "pad_center", path, length=3), 3, f"{where}: pad_center"),
-            pad_radius=float(_get(data, "pad_radius", path)),
-            pulley_radii=_vec(_get(data, "pulley_radii", path, length=2), 2,
-                              f"{where}: pulley_radii"),
-            stiffness=_vec(_get(data, "stiffness", path, length=2), 2, f"{where}: stiffness"),
-            rest_angles=_vec(_get(data, "rest_angles", path, length=2), 2,
-                             f"{where}: rest_angles"),
-            limits=(_vec(limits[0], 2, f"{where}: limits[0]"),
-                    _vec(limits[1], 2, f"{where}: limits[1]")),
-            link_masses=_vec(_get(data, "link_masses", path, length=2), 2,
-                             f"{where}: link_masses"),
-            link_coms=(_vec(_get(data, "link_coms", path, length=2)[0], 3,
-                            f"{where}: link_coms[0]"),
-                       _vec(data["link_coms"][1], 3, f"{where}: link_coms[1]")),
-            link_width=_opt_number(data, "link_width", 0.018, path),
-            visual_meshes=(_resolve_mesh(meshes.get("proximal_visual"), base, where),
-                           _resolve_mesh(meshes.get("distal_visual"), base, where)),
-            collision_meshes=(_resolve_mesh(meshes.get("proximal_collision"), base, where),
-                              _resolve_mesh(meshes.get("distal_collision"), base, where)),
+            name=s.string("name", path.stem),
+            proximal_length=s.number("proximal_length"),
+            distal_length=s.number("distal_length"),
+            pad_center=s.numbers("pad_center", 3, what="x, y, z"),
+            pad_radius=s.number("pad_radius"),
+            pulley_radii=s.numbers("pulley_radii", 2, what="r_p, r_d"),
+            stiffness=s.numbers("stiffness", 2, what="k_p, k_d"),
+            rest_angles=s.numbers("rest_angles", 2, what="proximal, distal"),
+            limits=(limits[0], limits[1]),
+            link_masses=s.numbers("link_masses", 2, what="proximal, distal"),
+            link_coms=(link_coms[0], link_coms[1]),
+            link_width=s.number("link_width", 0.018),
+            visual_meshes=(meshes.mesh("proximal_visual"), meshes.mesh("distal_visual")),
+            collision_meshes=(meshes.mesh("proximal_collision"),
+                              meshes.mesh("distal_collision")),
         )
     except SpecError as exc:
         if str(path) in str(exc):
@@ -373,6 +473,24 @@ def load_finger(name_or_path: str | Path) -> FingerSpec:
     return finger_from_dict(_read_yaml(path), path)
 
 
+def _slot_finger(s: _Section, hand_path: Path) -> FingerSpec:
+    """The finger of one hand slot: a name, a path relative to the hand file, or inline."""
+    ref = s.value("finger")
+    if isinstance(ref, dict):
+        return finger_from_dict(ref, hand_path, s.key("finger"))
+    if not isinstance(ref, str) or not ref:
+        s.fail(s.key("finger"), ref, "must be a finger name, a path to a .yaml finger file "
+               "or a finger mapping")
+    p = Path(ref)
+    if p.suffix in (".yaml", ".yml") and not p.is_absolute():
+        p = hand_path.parent / p
+    try:
+        return load_finger(p if p.suffix else ref)
+    except SpecError as exc:
+        # Name the hand file's key too: the finger file may be shared by several hands.
+        raise SpecError(f"{hand_path}: {s.key('finger')} = {ref!r}: {exc}") from None
+
+
 def load_hand(name_or_path: str | Path) -> HandSpec:
     """Load a hand by name (models/hands/NAME.yaml) or from a YAML file path.
 
@@ -380,62 +498,58 @@ def load_hand(name_or_path: str | Path) -> HandSpec:
     inline (a mapping in the finger format).
     """
     path = _named_or_path(name_or_path, "hands", "hand", available_hands())
-    data = _read_yaml(path)
-    slots = data.get("slots")
+    top = _Section(_read_yaml(path), path, "", _HAND_KEYS)
+    slots = top.value("slots")
     if not isinstance(slots, list) or not slots:
-        raise SpecError(f"{path}: 'slots' must be a non-empty list of finger mounts")
+        top.fail("slots", slots, "must be a non-empty list of finger mounts")
     mounts = []
-    for i, s in enumerate(slots):
-        if not isinstance(s, dict):
-            raise SpecError(f"{path}: slots[{i}] must be a mapping")
-        for key in ("slot", "position", "yaw", "finger"):
-            if key not in s:
-                raise SpecError(f"{path}: slots[{i}] is missing {key!r}")
-        finger_ref = s["finger"]
-        if isinstance(finger_ref, dict):
-            finger = finger_from_dict(finger_ref, path)
-        else:
-            ref = Path(str(finger_ref))
-            if ref.suffix in (".yaml", ".yml") and not ref.is_absolute():
-                ref = path.parent / ref
-            finger = load_finger(ref if ref.suffix else str(finger_ref))
-        yaw = s["yaw"]
-        if isinstance(yaw, bool) or not isinstance(yaw, (int, float)) or not math.isfinite(yaw):
-            raise SpecError(f"{path}: slots[{i}].yaw = {yaw!r} must be a finite number")
-        mounts.append(FingerMount(slot=str(s["slot"]),
-                                  position=_vec(s["position"], 3, f"{path}: slots[{i}].position"),
-                                  yaw=float(yaw), finger=finger))
-    spec = HandSpec(name=str(data.get("name", path.stem)), mounts=tuple(mounts),
-                    tendon_stiffness=float(_get(data, "tendon_stiffness", path)),
-                    spread=_opt_number(data, "spread", 0.0, path))
-    return spec
+    for i, data in enumerate(slots):
+        s = _Section(data, path, f"slots[{i}]", _SLOT_KEYS)
+        mounts.append(FingerMount(slot=s.string("slot"),
+                                  position=s.numbers("position", 3, what="x, y, z"),
+                                  yaw=s.number("yaw"), finger=_slot_finger(s, path)))
+    try:
+        return HandSpec(name=top.string("name", path.stem), mounts=tuple(mounts),
+                        tendon_stiffness=top.number("tendon_stiffness"),
+                        spread=top.number("spread", 0.0),
+                        palm_radius=top.number("palm_radius", HandSpec.palm_radius),
+                        palm_thickness=top.number("palm_thickness", HandSpec.palm_thickness))
+    except SpecError as exc:
+        if str(path) in str(exc):
+            raise
+        raise SpecError(f"{path}: {exc}") from None
+
+
+def _extras(s: _Section) -> dict[str, Any]:
+    """An object's `extras`: declared flags and numbers, in the file's order."""
+    return {k: s.flag(k) if k in _EXTRA_FLAGS else s.number(k) for k in s.data}
 
 
 def load_object(name_or_path: str | Path) -> ObjectSpec:
     """Load an object by name (models/objects/NAME.yaml) or from a YAML file path."""
     path = _named_or_path(name_or_path, "objects", "object", available_objects())
-    data = _read_yaml(path)
-    size = data.get("size")
-    if not isinstance(size, (list, tuple)) or not size:
-        raise SpecError(f"{path}: size = {size!r} must be a non-empty list of numbers")
-    mesh = _resolve_mesh(data.get("mesh"), path.parent, str(path))
+    s = _Section(_read_yaml(path), path, "", _OBJECT_KEYS)
+    shape = s.string("shape", choices=tuple(_SIZES))
+    n_size, size_what = _SIZES[shape]
     try:
         return ObjectSpec(
-            name=str(data.get("name", path.stem)),
-            shape=str(_get(data, "shape", path, kind=str)),
-            size=_vec(size, len(size), f"{path}: size"),
-            mass=float(_get(data, "mass", path)),
-            com=_vec(_get(data, "com", path, length=3), 3, f"{path}: com"),
-            tag_id=int(_get(data, "tag_id", path, kind=int)),
-            tag_size=float(_get(data, "tag_size", path)),
-            grasp_height=float(_get(data, "grasp_height", path)),
-            mesh=mesh,
-            friction=_opt_number(data, "friction", 1.0, path),
-            ycb=data.get("ycb"),
-            rgba=_vec(data.get("rgba", [0.8, 0.2, 0.2, 1.0]), 4, f"{path}: rgba"),
-            extras=dict(_opt_mapping(data, "extras", path)),
+            name=s.string("name", path.stem),
+            shape=shape,
+            size=s.numbers("size", n_size, what=f"{shape}: {size_what}"),
+            mass=s.number("mass"),
+            com=s.numbers("com", 3, what="x, y, z"),
+            tag_id=s.integer("tag_id"),
+            tag_size=s.number("tag_size"),
+            grasp_height=s.number("grasp_height"),
+            mesh=s.mesh("mesh"),
+            friction=s.number("friction", 1.0),
+            ycb=s.integer("ycb", None, allow_none=True),
+            rgba=s.numbers("rgba", 4, default=[0.8, 0.2, 0.2, 1.0], what="r, g, b, a"),
+            extras=_extras(s.section("extras", _EXTRA_FLAGS + _EXTRA_NUMBERS)),
         )
     except SpecError as exc:
+        if str(path) in str(exc):
+            raise
         raise SpecError(f"{path}: {exc}") from None
 
 
