@@ -1,0 +1,303 @@
+"""`vlr camera-calibrate` on MuJoCo renders of the printed board and a tag, seen by a palm
+camera with the model's field of view and resolution, a mounting error, lens distortion and
+sensor noise; the truth comes from the MJCF camera (vlr.camera.calibration_from_mujoco_camera)
+and the distortion put on the frames (sim.camera_effects), not from the calibration code."""
+
+from __future__ import annotations
+
+import math
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import cv2
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from models.make_tags import TEXTURE_PER_BLACK, tag_image
+from sim.camera_effects import CameraEffects, apply_effects, distortion_maps
+from sim.model import CAMERA_FOVY_DEG, CAMERA_HEIGHT
+from vlr.camera import CameraCalibration, calibration_from_mujoco_camera, load_calibration
+from vlr.cli import main
+from vlr.perception import lens
+
+WIDTH, HEIGHT = 640, 480
+DISTORTION = (-0.12, 0.03, 4e-4, -3e-4, 0.0)
+NOISE = 1.5                                   # grey levels
+MARGIN = (48, 36)                             # px rendered beyond each side, see `rendered`
+SQUARE, SQUARES = 0.012, (7, 5)               # the command's default board
+DPI = 254                                     # 120 px per 12 mm square
+# The camera is mounted 1.5 mm and 1 mm off the palm axis and tilted by about 2 degrees.
+CAMERA_POS = (0.0015, -0.001, CAMERA_HEIGHT)
+CAMERA_TILT_DEG = (1.5, -1.2, 0.8)
+TAG_ID, TAG_SIZE = 7, 0.02
+TAG_POSE = (0.003, -0.004, 0.065, 4.0, -6.0, 25.0)  # palm frame: m, rotation vector deg
+# Board poses in the palm: centre (x, y, z) [m] and rotation vector [deg] (identity: facing
+# the camera); offsets put corners in every part of the image, tilts give the focal length.
+BOARD_POSES = [
+    ((0.000, 0.000, 0.100), (0, 0, 0)),
+    ((-0.042, -0.032, 0.110), (25, -20, 5)),
+    ((0.042, -0.032, 0.110), (25, 20, -5)),
+    ((-0.042, 0.032, 0.110), (-25, -20, -8)),
+    ((0.042, 0.032, 0.110), (-25, 20, 8)),
+    ((0.000, 0.000, 0.085), (0, 35, 90)),
+    ((0.000, 0.000, 0.090), (35, 0, 10)),
+    ((-0.040, 0.000, 0.120), (0, -30, 0)),
+    ((0.040, 0.000, 0.120), (0, 30, 0)),
+    ((0.000, -0.030, 0.115), (30, 0, 0)),
+    ((0.000, 0.030, 0.115), (-30, 0, 180)),
+    ((0.010, 0.005, 0.140), (15, 15, 30)),
+]
+TAG_ARGS = ["--tag-id", str(TAG_ID), "--tag-size", str(TAG_SIZE),
+            "--tag-pose", *map(str, TAG_POSE)]
+
+
+def _scene_xml(board_png: Path, board_size: tuple[float, float], tag_png: Path, fovy: float,
+               width: int, height: int) -> str:
+    cam_quat = (Rotation.from_rotvec(CAMERA_TILT_DEG, degrees=True)
+                * Rotation.from_euler("x", 180, degrees=True)).as_quat(scalar_first=True)
+    side = TAG_SIZE * TEXTURE_PER_BLACK
+    # Emissive, unlit materials: the texture's grey levels reach the image unshaded. Each
+    # card is a thin box turned by pi about x so that its textured face, at z = 0 of its body,
+    # looks at the camera unmirrored (as sim/model.py does for the object tags).
+    return f"""<mujoco>
+      <visual><headlight ambient="0 0 0" diffuse="0 0 0" specular="0 0 0"/>
+        <quality offsamples="8"/><global offwidth="{width}" offheight="{height}"/></visual>
+      <asset>
+        <texture name="board" type="2d" file="{board_png}"/>
+        <texture name="tag" type="2d" file="{tag_png}"/>
+        <material name="board" texture="board" emission="1" specular="0" rgba="1 1 1 1"/>
+        <material name="tag" texture="tag" emission="1" specular="0" rgba="1 1 1 1"/>
+      </asset>
+      <worldbody>
+        <camera name="palm_camera" pos="{' '.join(map(str, CAMERA_POS))}"
+                quat="{' '.join(map(str, cam_quat))}" fovy="{fovy!r}"/>
+        <body name="board" mocap="true" pos="0 0 -1">
+          <geom type="box" size="{board_size[0] / 2} {board_size[1] / 2} 0.0005"
+                pos="0 0 0.0005" quat="0 1 0 0" material="board"/>
+        </body>
+        <body name="tag" mocap="true" pos="0 0 -1">
+          <geom type="box" size="{side / 2} {side / 2} 0.0005" pos="0 0 0.0005"
+                quat="0 1 0 0" material="tag"/>
+        </body>
+      </worldbody></mujoco>"""
+
+
+@pytest.fixture(scope="module")
+def rendered(tmp_path_factory):
+    """Board views and a tag image as the distorting, noisy palm camera sees them, and the
+    true calibration: {"views": DIR, "tag": FILE, "board": FILE, "truth": CameraCalibration}.
+
+    A barrel lens's image corners see rays from outside the pinhole field of view, so the
+    scene is rendered MARGIN px larger on each side at the same focal length (a wider fovy);
+    each output pixel then reads that render at its undistorted position (the maps of
+    sim.camera_effects, shifted by the margin) and the sensor adds noise."""
+    os.environ.setdefault("MUJOCO_GL", "egl")
+    mujoco = pytest.importorskip("mujoco")
+    root = tmp_path_factory.mktemp("camcal")
+    board_png = root / "board.png"
+    assert main(["camera-calibrate", "--print-board", str(board_png), "--dpi", str(DPI)]) == 0
+    tex = cv2.imread(str(board_png), cv2.IMREAD_GRAYSCALE)
+    pps = round(SQUARE / 0.0254 * DPI)
+    assert tex.shape == ((SQUARES[1] + 1) * pps, (SQUARES[0] + 1) * pps)  # half-square margin
+    board_size = (tex.shape[1] / pps * SQUARE, tex.shape[0] / pps * SQUARE)
+    tag_png = root / "tag_texture.png"
+    cv2.imwrite(str(tag_png), tag_image(TAG_ID))
+    mx, my = MARGIN
+    wide_w, wide_h = WIDTH + 2 * mx, HEIGHT + 2 * my
+    f = (HEIGHT / 2) / math.tan(math.radians(CAMERA_FOVY_DEG) / 2)
+    wide_fovy = math.degrees(2 * math.atan((wide_h / 2) / f))
+    model = mujoco.MjModel.from_xml_string(
+        _scene_xml(board_png, board_size, tag_png, wide_fovy, wide_w, wide_h))
+    data = mujoco.MjData(model)
+    mujoco.mj_forward(model, data)
+    wide = calibration_from_mujoco_camera(float(model.cam_fovy[0]), wide_w, wide_h,
+                                          data.cam_xpos[0], data.cam_xmat[0].reshape(3, 3))
+    K = wide.K.copy()
+    K[:2, 2] -= MARGIN  # the output is the render's centre crop
+    truth = CameraCalibration(WIDTH, HEIGHT, K, np.asarray(DISTORTION), wide.T_palm_cam)
+    map_x, map_y = distortion_maps(K, DISTORTION, WIDTH, HEIGHT)
+    map_x, map_y = map_x + np.float32(mx), map_y + np.float32(my)
+    noise = CameraEffects(noise_std=NOISE)
+    rng = np.random.default_rng(0)
+    try:
+        renderer = mujoco.Renderer(model, wide_h, wide_w)
+    except Exception as exc:  # no EGL on this machine
+        pytest.skip(f"MuJoCo offscreen rendering unavailable: {exc}")
+    away = np.array([0.0, 0.0, -1.0])  # behind the camera
+
+    def shot(board_pose, tag_pose) -> np.ndarray:
+        for mocap, pose in ((0, board_pose), (1, tag_pose)):
+            pos, rotvec = pose if pose is not None else (away, (0, 0, 0))
+            data.mocap_pos[mocap] = pos
+            data.mocap_quat[mocap] = Rotation.from_rotvec(rotvec, degrees=True).as_quat(
+                scalar_first=True)
+        mujoco.mj_forward(model, data)
+        renderer.update_scene(data, camera="palm_camera")
+        image = cv2.remap(renderer.render(), map_x, map_y, cv2.INTER_LINEAR)
+        return cv2.cvtColor(apply_effects(image, noise, rng, truth), cv2.COLOR_RGB2BGR)
+
+    views = root / "views"
+    views.mkdir()
+    try:
+        for k, pose in enumerate(BOARD_POSES):
+            cv2.imwrite(str(views / f"view_{k:02d}.png"), shot(pose, None))
+        tag = root / "tag.png"
+        cv2.imwrite(str(tag), shot(None, (TAG_POSE[:3], TAG_POSE[3:])))
+    finally:
+        renderer.close()
+    return {"views": views, "tag": tag, "board": board_png, "truth": truth}
+
+
+def _errors(cal, truth) -> dict[str, float]:
+    rel = np.abs(np.array([cal.K[0, 0], cal.K[1, 1], cal.K[0, 2], cal.K[1, 2]])
+                 / np.array([truth.K[0, 0], truth.K[1, 1], truth.K[0, 2], truth.K[1, 2]]) - 1)
+    dR = cal.T_palm_cam[:3, :3].T @ truth.T_palm_cam[:3, :3]
+    return {"fx": rel[0], "fy": rel[1], "cx": rel[2], "cy": rel[3],
+            "position_mm": 1e3 * float(np.linalg.norm(cal.T_palm_cam[:3, 3]
+                                                      - truth.T_palm_cam[:3, 3])),
+            "rotation_deg": float(np.degrees(Rotation.from_matrix(dR).magnitude()))}
+
+
+def _distortion_gap_px(cal, truth, radius_px: float) -> float:
+    """Largest distance [px] between where the fitted and the true camera image the same ray,
+    over the image within `radius_px` of its centre."""
+    u, v = np.meshgrid(np.arange(0, WIDTH, 10.0), np.arange(0, HEIGHT, 10.0))
+    pts = np.stack([u.ravel(), v.ravel()], axis=1)
+    pts = pts[np.linalg.norm(pts - truth.K[:2, 2], axis=1) <= radius_px]
+    ideal = lens.to_ideal(pts, truth.K, truth.dist)
+    rays = np.column_stack([(ideal - truth.K[:2, 2]) / np.diag(truth.K)[:2], np.ones(len(pts))])
+    fitted, _ = cv2.projectPoints(rays, np.zeros(3), np.zeros(3), cal.K, cal.dist)
+    return float(np.max(np.linalg.norm(fitted.reshape(-1, 2) - pts, axis=1)))
+
+
+def _assert_accurate(err: dict[str, float]) -> None:
+    for key in ("fx", "fy", "cx", "cy"):
+        assert err[key] < 0.005, err
+    assert err["position_mm"] < 0.5, err
+    assert err["rotation_deg"] < 0.2, err
+
+
+def test_calibrates_rendered_views_from_a_folder(rendered, tmp_path, capsys) -> None:
+    out = tmp_path / "camera.yaml"
+    rc = main(["camera-calibrate", "--images", str(rendered["views"]), "--tag-image",
+               str(rendered["tag"]), *TAG_ARGS, "--out", str(out)])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    assert f"view {len(BOARD_POSES)} (" in text and "% of the image covered" in text
+    cal = load_calibration(out)
+    assert (cal.width, cal.height) == (WIDTH, HEIGHT)
+    err = _errors(cal, rendered["truth"])
+    print({k: round(v, 6) for k, v in err.items()}, text, sep="\n")
+    _assert_accurate(err)
+    # The coefficients trade off (k2 against k3), the lens they make must not, where the
+    # board was seen (the views reach 300 px from the centre; no distortion model would be
+    # 19 px off there). Beyond it the fit extrapolates: 2.4 px in the image corners.
+    gap = _distortion_gap_px(cal, rendered["truth"], 300.0)
+    print(f"lens model within 300 px of the centre: {gap:.3f} px")
+    assert gap < 1.0
+    assert [p.name for p in tmp_path.iterdir()] == ["camera.yaml"]
+
+    # No tag: the intrinsics are recalibrated and the extrinsics of --out kept.
+    rc = main(["camera-calibrate", "--images", str(rendered["views"]), "--out", str(out)])
+    assert rc == 0
+    np.testing.assert_array_equal(load_calibration(out).T_palm_cam, cal.T_palm_cam)
+
+
+def test_live_camera_keeps_moving_views_until_covered(rendered, tmp_path, monkeypatch,
+                                                       capsys) -> None:
+    import hardware.camera_calibration as cc
+    from hardware.camera import FakeCamera
+
+    board = [cv2.imread(str(p)) for p in sorted(rendered["views"].iterdir())]
+    tag = cv2.imread(str(rendered["tag"]))
+    # Each board view arrives three times (a still board: one kept), then the tag.
+    frames = iter([f for f in board for _ in range(3)] + [tag] * 20)
+
+    def source():
+        return cv2.cvtColor(next(frames), cv2.COLOR_BGR2RGB)
+
+    monkeypatch.setattr("hardware.camera.OpenCVCamera",
+                        lambda index, width=None, height=None: FakeCamera(source=source))
+    monkeypatch.setattr("builtins.input", lambda prompt="": "")
+    monkeypatch.setattr(cc, "TAG_TIMEOUT_S", 30.0)
+    out = tmp_path / "camera.yaml"
+    saved = tmp_path / "kept"
+    rc = main(["camera-calibrate", "--camera", "0", *TAG_ARGS, "--out", str(out),
+               "--min-views", "8", "--min-coverage", "0.6", "--tag-frames", "5",
+               "--save-views", str(saved)])
+    text = capsys.readouterr().out
+    assert rc == 0, text
+    lines = [line for line in text.splitlines() if line.startswith("view ")]
+    assert len(lines) >= 8 and len(lines) == len(list(saved.iterdir()))
+    assert "over 5 frames" in text
+    _assert_accurate(_errors(load_calibration(out), rendered["truth"]))
+
+    # The tag never shows: one line naming it once the wait is over, and no file.
+    frames = iter([f for f in board for _ in range(3)] + [board[0]] * 1000)
+    monkeypatch.setattr(cc, "TAG_TIMEOUT_S", 0.3)
+    none = tmp_path / "none.yaml"
+    rc = main(["camera-calibrate", "--camera", "0", *TAG_ARGS, "--out", str(none),
+               "--min-views", "8", "--min-coverage", "0.6"])
+    assert rc == 2
+    assert f"camera (for 0.3 s): tag {TAG_ID} not found" in _error_line(capsys)
+    assert not none.exists()
+
+
+def _error_line(capsys) -> str:
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1, err
+    assert err[0].startswith("vlr camera-calibrate: error: ")
+    return err[0]
+
+
+def test_bad_input_is_one_line_and_no_file(rendered, tmp_path, capsys) -> None:
+    out = tmp_path / "out" / "camera.yaml"
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    args = ["camera-calibrate", *TAG_ARGS, "--out", str(out)]
+    assert main([*args, "--images", str(empty), "--tag-image", str(rendered["tag"])]) == 2
+    assert str(empty) in _error_line(capsys)
+
+    few = tmp_path / "few"
+    few.mkdir()
+    for p in sorted(rendered["views"].iterdir())[:2]:
+        (few / p.name).write_bytes(p.read_bytes())
+    (few / "tag.png").write_bytes(rendered["tag"].read_bytes())  # no board in it
+    assert main([*args, "--images", str(few), "--tag-image", str(rendered["tag"])]) == 2
+    assert "seen in 2 of 3 images" in _error_line(capsys)
+
+    # The tag is looked for after the calibration: a board view holds no 36h11 tag.
+    not_tag = sorted(rendered["views"].iterdir())[0]
+    assert main([*args, "--images", str(rendered["views"]), "--tag-image", str(not_tag)]) == 2
+    line = _error_line(capsys)
+    assert str(not_tag) in line and f"tag {TAG_ID} not found" in line
+
+    assert main([*args, "--images", str(rendered["views"]), "--tag-image",
+                 str(rendered["tag"]), "--tag-pose", "0", "0", "nan", "0", "0", "0"]) == 2
+    assert "--tag-pose" in _error_line(capsys)
+    assert main(["camera-calibrate", "--images", str(rendered["views"]), "--out",
+                 str(out)]) == 2  # no tag and no calibration to keep the extrinsics of
+    assert "no tag given" in _error_line(capsys)
+    assert main(["camera-calibrate", "--print-board", str(tmp_path / "b.png"),
+                 "--marker-length", "0.02"]) == 2
+    assert "--marker-length 0.02" in _error_line(capsys)
+    assert not out.exists() and not (tmp_path / "b.png").exists()
+    assert not out.parent.exists() or not any(out.parent.iterdir())
+
+
+def test_command_line_error_exits_2_without_traceback(tmp_path) -> None:
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    tag = tmp_path / "tag.png"
+    tag.touch()
+    proc = subprocess.run([sys.executable, "-m", "vlr.cli", "camera-calibrate", "--images",
+                           str(empty), *TAG_ARGS, "--tag-image", str(tag), "--out",
+                           str(tmp_path / "c.yaml")], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        f"vlr camera-calibrate: error: --images {empty}: no images "
+        "(.png, .jpg, .jpeg, .bmp, .tif, .tiff) in it"]
