@@ -1,30 +1,43 @@
 """The common gymnasium environment of the in-hand manipulation tasks (docs/METHOD.md 5-6).
 
-One template for every task (Gymnasium-Robotics style): `reset` opens the backend once,
-grasps and self-identifies the hand-object system (Algorithm 1, `vlr.run`, with the same
-settings tree and backend defaults as `vlr identify`) so that an episode starts from an
-identified VLR, then lets the task set itself up (`_start_task`);
-`step` applies a tendon change, re-observes the POM through the camera, lets the particle
-filter keep updating the VLR (contacts roll), then asks the task for reward and progress
-(`_task_step`).
+One template for every task, in the conventions of Gymnasium-Robotics' goal environments:
+`reset` opens the backend once, grasps and (by default) self-identifies the hand-object
+system (Algorithm 1, `vlr.run`, with the same settings tree and backend defaults as `vlr
+identify`) so that an episode starts from an identified VLR, then lets the task set itself up
+(`_start_task`); `step` applies a tendon change, re-observes the POM through the camera, lets
+the particle filter keep updating the VLR (contacts roll), then lets the task advance its
+target (`_task_step`).
 
-What a policy sees: tendon commands and camera-derived POM poses only (the observation), and,
-through `env.unwrapped`, the identified filter (`pf`), the current commands, the last camera
-pose and the record of every move (`moves`) - what the VLR baseline (`tasks.baseline`) uses.
-Ground truth (sim only) goes to `info["truth"]` and to the task metrics, never to the filter
-or the policy.
+Action: a Box(-1, 1, (3,), float32): the change of each tendon command as a share of
+`max_step` (the identification's largest exploratory step, 0.4 mm by default); the change
+applied in metres is `info["action_m"]`, the commands `info["commands"]`. Commands are also
+kept within `command_band` of the task's centre command, so that no sequence of actions
+slackens a tendon or crushes the object (the grasp's workspace).
 
-Action: the change of the tendon commands [m], a Box of +-`max_step` per tendon (the
-identification's largest exploratory step, 0.4 mm; the sim refuses more than 2 mm per move).
-Commands are also kept within +-`command_band` of the task's centre command, so that no
-sequence of actions slackens a tendon or crushes the object (the grasp's workspace).
+Observation: a Dict of `observation` (the POM's camera pose [x, y, z, rotation vector], then
+the tendon commands relative to the task's centre [m]), `achieved_goal` (what the task
+steers, from the camera: the POM's position, its rotation vector, or both, `goal_rows`) and
+`desired_goal` (the current target, alike); with `include_image`, the palm camera frame.
+The reward is `compute_reward(achieved_goal, desired_goal, info)`: minus the distance to the
+target (mm, degrees, or Eq. 12's weighted pose error), and `info["is_success"]` says whether
+the camera puts the POM within the task's tolerance of it.
+
+What a policy sees: tendon commands and camera-derived POM poses, and, through
+`env.unwrapped`, the identified filter (`pf`), the last camera pose and the record of every
+move (`moves`): what the VLR baseline (`tasks.baseline`) uses. Ground truth (sim only) goes
+to the task metrics (`vlr task`'s scores), and to `info["truth"]` only when the env is made
+with `expose_truth=True`; never to the filter or to a policy.
+
+Failures a vectorised learner survives: an identification that fails in `reset` (no tag
+seen, no particle settled) sets `info["identification_failed"]` and the next `step`
+truncates the episode; a lost grasp terminates it with `info["grasp_lost"]`.
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import gymnasium as gym
 import numpy as np
@@ -32,11 +45,15 @@ from gymnasium import spaces
 
 from vlr.controller import ControllerConfig, rotation_log
 from vlr.errors import UserError
+from vlr.hand import GraspError
 
 # The tasks' scenes, bands and controllers are the Model O's: one tendon per finger, three.
 TENDONS = 3
 
-__all__ = ["Move", "HandTaskEnv", "pose_vector", "save_figure"]
+#: What `achieved_goal` and `desired_goal` hold: their columns of `pose_vector`.
+GOAL_COLUMNS = {"position": slice(0, 3), "rotation": slice(3, 6), "pose": slice(0, 6)}
+
+__all__ = ["Move", "HandTaskEnv", "GOAL_COLUMNS", "pose_vector", "save_figure"]
 
 
 @dataclass(frozen=True)
@@ -54,16 +71,21 @@ def pose_vector(position: np.ndarray, rotation: np.ndarray) -> np.ndarray:
 
 
 class HandTaskEnv(gym.Env):
-    """Base class of the tasks; subclasses set `object_name`, `controller_config` and fill
-    `_start_task`, `_task_step`, `_target`, `metrics` and `picture`.
+    """Base class of the tasks; subclasses set `object_name`, `controller_config`,
+    `goal_rows` and fill `_start_task`, `_task_step`, `_target`, `_goal_reached`,
+    `metrics` and `picture`.
 
     Args:
         backend: "sim" (MuJoCo) or "hardware" (the real hand; needs `hardware_config`).
         render_mode: None or "rgb_array" (a third-person view of the sim scene; on hardware
             the palm camera's frame).
+        identify: self-identify the grasp in `reset` (Algorithm 1). Off, `reset` costs a
+            grasp and `step` a move and a frame, and there is no filter (`pf` is None, the
+            VLR baseline cannot run).
+        filter_updates: let the filter update the VLR on every step (with `identify`).
         particles: particle count of the identification in reset.
         identify_iterations: its exploratory moves (all are made, even after convergence).
-        max_step: action bound per tendon and move [m].
+        max_step: the tendon change of an action of 1 [m].
         command_band: (release, pull): commands stay within [centre - release, centre +
             pull] of the task's centre command [m]; each a number, or one per tendon in the
             hand's order (a finger that holds more tension can release more). Releasing is
@@ -79,20 +101,25 @@ class HandTaskEnv(gym.Env):
             of the settings tree (`vlr.settings`, as `vlr identify --set`), e.g.
             {"filter.guess_theta_deg": [-5, 20]}; `particles` and `identify_iterations`
             set filter.particles and the loop's action count.
+        expose_truth: put the simulator's ground truth in `info["truth"]` (for scoring;
+            a compared policy must not read it).
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+    metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}
     object_name = "apple"
     controller_config = ControllerConfig()
+    goal_rows = "position"   # a key of GOAL_COLUMNS
 
-    def __init__(self, backend: str = "sim", render_mode: str | None = None,
+    def __init__(self, backend: str = "sim", render_mode: str | None = None, *,
+                 identify: bool = True, filter_updates: bool = True,
                  particles: int = 5000, identify_iterations: int = 15,
                  max_step: float = 0.4e-3,
                  command_band: tuple[float, float] = (0.25e-3, 0.4e-3),
                  squeeze: float = 0.0,
                  include_image: bool = False, image_size: tuple[int, int] = (120, 160),
                  hardware_config: str | None = None,
-                 settings: Mapping[str, Any] | None = None) -> None:
+                 settings: Mapping[str, Any] | None = None,
+                 expose_truth: bool = False) -> None:
         if backend not in ("sim", "hardware"):
             raise ValueError(f"backend {backend!r}: use 'sim' or 'hardware'")
         if backend == "hardware" and not hardware_config:
@@ -106,6 +133,9 @@ class HandTaskEnv(gym.Env):
             raise ValueError(f"max_step {max_step!r} must be > 0 [m]")
         self.backend = backend
         self.render_mode = render_mode
+        self.identify = bool(identify)
+        self.filter_updates = bool(filter_updates)
+        self.expose_truth = bool(expose_truth)
         self.particles = int(particles)
         self.identify_iterations = int(identify_iterations)
         self.max_step = float(max_step)
@@ -116,12 +146,15 @@ class HandTaskEnv(gym.Env):
         self.settings_layer = dict(settings or {})
         # The identification's settings, checked now: a bad key is one error at make().
         self.identification_settings(0)
-        self.action_space = spaces.Box(-self.max_step, self.max_step, shape=(TENDONS,),
-                                       dtype=np.float64)
-        # Poses: position within 1 m of the palm [m], rotation vector (norm <= pi) [rad].
-        lim = np.array([1.0] * 3 + [np.pi] * 3)
-        obs = {"pose": spaces.Box(-lim, lim, dtype=np.float64),
-               "target": spaces.Box(-lim, lim, dtype=np.float64)}
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(TENDONS,), dtype=np.float32)
+        # Poses: position within 1 m of the palm [m], rotation vector (norm <= pi) [rad];
+        # commands within 1 cm of the centre [m] (the band is a fraction of a millimetre).
+        pose = np.array([1.0] * 3 + [np.pi] * 3)
+        lim = np.concatenate([pose, [0.01] * TENDONS])
+        goal = pose[GOAL_COLUMNS[self.goal_rows]]
+        obs = {"observation": spaces.Box(-lim, lim, dtype=np.float64),
+               "achieved_goal": spaces.Box(-goal, goal, dtype=np.float64),
+               "desired_goal": spaces.Box(-goal, goal, dtype=np.float64)}
         self._image_shape: tuple[int, int, int] | None = None
         if include_image:
             self._image_shape = (int(image_size[0]), int(image_size[1]), 3)
@@ -136,6 +169,8 @@ class HandTaskEnv(gym.Env):
         self.filter_lost = False
         self.grasp_lost = False
         self.grasp_message = ""
+        self.identification_failed = ""   # why the last identification failed, if it did
+        self._last_action_m = np.zeros(TENDONS)   # the tendon change of the last step [m]
         self.episode = 0
         self.identified = 0          # identifications so far (several per episode: cups)
         self._image: np.ndarray | None = None
@@ -163,12 +198,12 @@ class HandTaskEnv(gym.Env):
         return self._target()
 
     def action_bounds(self) -> tuple[np.ndarray, np.ndarray]:
-        """The tendon changes [m] (low, high) that keep the commands inside the band and the
-        action space now: what `step` would clip an action to."""
+        """The tendon changes [m] (low, high) that keep the commands inside the band and
+        within `max_step` now: what `step` would clip an action's change to."""
         release, pull = self.command_band
         u = self.commands
-        low = np.maximum(self.action_space.low, self.center - release - u)
-        high = np.minimum(self.action_space.high, self.center + pull - u)
+        low = np.maximum(-self.max_step, self.center - release - u)
+        high = np.minimum(self.max_step, self.center + pull - u)
         return np.minimum(low, 0.0), np.maximum(high, 0.0)
 
     @property
@@ -202,8 +237,17 @@ class HandTaskEnv(gym.Env):
                                 f"the backend's hand has {n} fingers")
             self.hand = hand
         self.episode += 1
-        self._prepare_episode()
-        self._identify_grasp()
+        self.identification_failed = ""
+        self.observation = None
+        self._last_action_m = np.zeros(TENDONS)
+        try:
+            self._prepare_episode()
+            self._identify_grasp()
+        except (GraspError, FloatingPointError) as exc:
+            # No VLR to start from (no tag seen after the grasp, no particle settled): the
+            # episode ends at the first step, with the reason in info.
+            self.identification_failed = f"{type(exc).__name__}: {exc}"
+            return self._get_obs(), self._info()
         self._start_task()
         return self._get_obs(), self._info()
 
@@ -242,6 +286,11 @@ class HandTaskEnv(gym.Env):
         self.filter_lost = self.grasp_lost = False
         self.grasp_message = ""
         self.identified += 1
+        self.pf = self.identification = None
+        if not self.identify:
+            self._grasp_only(settings.loop.first_observation_frames)
+            self._go_to_centre()
+            return
         box: dict[str, Any] = {}
 
         def observer():
@@ -270,8 +319,23 @@ class HandTaskEnv(gym.Env):
         self._u = np.asarray(self.hand.commands, dtype=float).copy()
         self.observation = next(m.observation for m in reversed(self.moves)
                                 if m.observation is not None)
-        # The task's centre is the grasp command (identification's exploration leaves the
-        # commands anywhere in its band), plus the squeeze.
+        self._go_to_centre()
+
+    def _grasp_only(self, frames: int) -> None:
+        """`reset` without identification: grasp and wait for the tag (at most `frames`)."""
+        self.hand.grasp()
+        self._u = np.asarray(self.hand.commands, dtype=float).copy()
+        for _ in range(frames):
+            obs = self._observe()
+            self.moves.append(Move(self._u.copy(), obs))
+            if obs is not None:
+                self.observation = obs
+                return
+        raise GraspError(f"the object's tag was not seen in {frames} frames after the grasp")
+
+    def _go_to_centre(self) -> None:
+        """Move the commands to the task's centre: the grasp command (identification's
+        exploration leaves the commands anywhere in its band), plus the squeeze."""
         self.center = self.moves[0].commands + self.squeeze
         while np.max(np.abs(self.center - self.commands)) > 1e-9 and not self.grasp_lost:
             before = self.commands
@@ -282,15 +346,43 @@ class HandTaskEnv(gym.Env):
                                 "squeeze?)")
 
     def step(self, action):
-        a = np.clip(np.asarray(action, dtype=float).reshape(TENDONS), -self.max_step,
-                    self.max_step)
+        if self.identification_failed:   # reset found no VLR to start from
+            return self._get_obs(), 0.0, False, True, self._info()
+        a = np.asarray(action, dtype=float)
+        if a.shape != (TENDONS,):
+            raise ValueError(f"action {action!r}: shape {a.shape}, expected ({TENDONS},)")
+        if not np.all(np.isfinite(a)):
+            raise ValueError(f"action {a.tolist()} is not finite")
         u = self.commands
         release, pull = self.command_band
-        target = np.clip(u + a, self.center - release, self.center + pull)
+        target = np.clip(u + np.clip(a, -1.0, 1.0) * self.max_step, self.center - release,
+                         self.center + pull)
         self._apply(target - u)
-        reward, terminated = self._task_step()
-        terminated = bool(terminated or self.grasp_lost)
-        return self._get_obs(), float(reward), terminated, False, self._info()
+        self._last_action_m = self.commands - u
+        terminated = bool(self._task_step() or self.grasp_lost)
+        obs, info = self._get_obs(), self._info()
+        reward = float(self.compute_reward(obs["achieved_goal"], obs["desired_goal"], info))
+        return obs, reward, terminated, False, info
+
+    def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray,
+                       info: Any = None) -> np.ndarray | float:
+        """Minus the distance from `achieved_goal` to `desired_goal` (..., n): position in
+        mm, rotation in degrees, a pose as Eq. 12's weighted error (mm and `alpha` x degrees,
+        the task's `controller_config`). Vectorised over leading dimensions, as
+        Gymnasium-Robotics' goal environments (HER relabels with it)."""
+        pos_mm, rot_deg = _goal_distances(self.goal_rows, achieved_goal, desired_goal)
+        if self.goal_rows == "position":
+            d = pos_mm
+        elif self.goal_rows == "rotation":
+            d = rot_deg
+        else:
+            d = np.hypot(pos_mm, self.controller_config.alpha * rot_deg)
+        return -d
+
+    def _goal_reached(self, pos_mm: np.ndarray, rot_deg: np.ndarray) -> np.ndarray | bool:
+        """Whether distances (position mm, rotation degrees) are within the task's
+        tolerance (`info["is_success"]`)."""
+        raise NotImplementedError
 
     def _apply(self, delta: np.ndarray) -> None:
         """Apply a tendon change, re-observe, let the filter update the VLR (`pf.step`)."""
@@ -307,7 +399,7 @@ class HandTaskEnv(gym.Env):
         self.moves.append(Move(u, obs))
         if obs is not None:
             self.observation = obs
-        if self.filter_lost:
+        if self.pf is None or self.filter_lost or not self.filter_updates:
             return
         try:
             self.pf.step(u, obs)
@@ -332,7 +424,17 @@ class HandTaskEnv(gym.Env):
     # ------------------------------------------------------------------ observation
     def _get_obs(self) -> dict[str, np.ndarray]:
         o = self.observation
-        out = {"pose": pose_vector(o.position, o.rotation), "target": self._target_vector()}
+        cols = GOAL_COLUMNS[self.goal_rows]
+        if o is None:   # no pose seen (a failed identification)
+            pose = np.zeros(6)
+            achieved = desired = pose[cols]
+            rel = np.zeros(TENDONS)
+        else:
+            pose = pose_vector(o.position, o.rotation)
+            achieved, desired = pose[cols], self._target_vector()[cols]
+            rel = self.commands - (self.center if self.center is not None else self.commands)
+        out = {"observation": np.concatenate([pose, rel]), "achieved_goal": achieved.copy(),
+               "desired_goal": desired.copy()}
         if self.include_image:
             img = self._image if self._image is not None else np.zeros(self._image_shape,
                                                                        np.uint8)
@@ -348,11 +450,21 @@ class HandTaskEnv(gym.Env):
     def _info(self) -> dict[str, Any]:
         # No moves yet when a pick inside a step failed (cups): no tag seen since.
         seen = bool(self.moves) and self.moves[-1].observation is not None
-        info: dict[str, Any] = {"commands": self.commands, "tag_seen": seen,
-                                "filter_lost": self.filter_lost,
-                                "grasp_lost": self.grasp_lost}
+        info: dict[str, Any] = {"commands": self.commands,
+                                "action_m": self._last_action_m.copy(),
+                                "tag_seen": seen, "filter_lost": self.filter_lost,
+                                "grasp_lost": self.grasp_lost,
+                                "identification_failed": self.identification_failed}
+        if self.observation is None or self.identification_failed:
+            info["is_success"] = False
+            return info
         info.update(self._task_info())
-        if self.backend == "sim" and self.has_truth:
+        pose = pose_vector(self.observation.position, self.observation.rotation)
+        cols = GOAL_COLUMNS[self.goal_rows]
+        pos_mm, rot_deg = _goal_distances(self.goal_rows, pose[cols],
+                                          self._target_vector()[cols])
+        info["is_success"] = bool(self._goal_reached(pos_mm, rot_deg))
+        if self.expose_truth and self.backend == "sim" and self.has_truth:
             t = self.hand.truth()
             info["truth"] = {"pom_position": t.pom_position.copy(),
                              "pom_rotation": t.pom_rotation.copy(), **self._truth_info()}
@@ -372,7 +484,8 @@ class HandTaskEnv(gym.Env):
     def _start_task(self) -> None:
         raise NotImplementedError
 
-    def _task_step(self) -> tuple[float, bool]:
+    def _task_step(self) -> bool:
+        """Advance the task after a move; returns whether the task is done."""
         raise NotImplementedError
 
     def _target(self) -> tuple[np.ndarray, np.ndarray | None]:
@@ -392,6 +505,25 @@ class HandTaskEnv(gym.Env):
     def picture(self, path) -> None:
         """Write the task's picture (PNG) to `path`."""
         raise NotImplementedError
+
+
+def _goal_distances(rows: str, achieved: np.ndarray,
+                    desired: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(position distance [mm], rotation angle [deg]) between goals (..., n) of `rows`
+    (`GOAL_COLUMNS`); a part the goals do not hold is 0."""
+    from scipy.spatial.transform import Rotation
+
+    a, d = np.asarray(achieved, dtype=float), np.asarray(desired, dtype=float)
+    lead = np.broadcast_shapes(a.shape, d.shape)[:-1]
+    a, d = np.broadcast_to(a, lead + a.shape[-1:]), np.broadcast_to(d, lead + d.shape[-1:])
+    zero = np.zeros(lead)
+    pos = np.linalg.norm(a[..., :3] - d[..., :3], axis=-1) * 1e3 if rows != "rotation" else zero
+    if rows == "position":
+        return pos, zero
+    # (Copies: scipy wants writable arrays, and broadcast views are read-only.)
+    ra, rd = np.array(a[..., -3:]).reshape(-1, 3), np.array(d[..., -3:]).reshape(-1, 3)
+    rel = Rotation.from_rotvec(rd) * Rotation.from_rotvec(ra).inv()
+    return pos, np.degrees(rel.magnitude()).reshape(lead)
 
 
 def _band(command_band) -> tuple:

@@ -1,6 +1,6 @@
 """The VLR baseline policy: the Jacobian controller (Eq. 10-12) on the env's identified VLR.
 
-    env = gymnasium.make("vlr/Handwriting-v0")
+    env = gymnasium.make("vlr/Handwriting-v1")
     obs, info = env.reset(seed=0)
     policy = VLRBaseline(env)
     while True:
@@ -66,7 +66,8 @@ def fitted_jacobian(env: Any, config: ControllerConfig) -> np.ndarray:
 
 
 class VLRBaseline:
-    """Callable policy: observation -> tendon change [m] (module docstring).
+    """Callable policy: observation -> action (the tendon change as a share of the env's
+    `max_step`, in [-1, 1]; module docstring).
 
     Args:
         env: a task env (or a wrapper of one).
@@ -76,7 +77,12 @@ class VLRBaseline:
 
     def __init__(self, env: Any, config: ControllerConfig | None = None,
                  **changes: Any) -> None:
+        from vlr.errors import UserError
+
         self.env = env.unwrapped
+        if not self.env.identify:
+            raise UserError("the VLR baseline needs the identified VLR: make the env with "
+                            "identify=True")
         cfg = config or self.env.controller_config
         self.config = replace(cfg, **changes) if changes else cfg
         self._episode = -1
@@ -102,4 +108,5 @@ class VLRBaseline:
         pos, rot = env.target
         du = self.controller.act(env.pf.motion, env.pf.state, env.commands, env.observation,
                                  pos, rot, bounds=env.action_bounds())
-        return np.clip(du, env.action_space.low, env.action_space.high)
+        # float64, not the space's float32: the change applied is then du itself.
+        return np.clip(du / env.max_step, -1.0, 1.0)

@@ -1,8 +1,9 @@
 """Example policies for `vlr task NAME --policy tasks.examples:NAME` (docs/TASKS.md).
 
 A policy factory takes the unwrapped environment after its identification and returns a
-callable from the observation to the action, the three tendon changes [m]. These two are
-references to compare a controller against, not controllers worth using:
+callable from the observation to the action, the three tendon changes as shares of the env's
+`max_step` ([-1, 1]). These two are references to compare a controller against, not
+controllers worth using:
 
 - `hold`: never moves. The task's error when nothing is done: what a controller must beat.
 - `camera_only`: a proportional step through a Jacobian fitted to the camera's view of the
@@ -16,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from tasks.base import GOAL_COLUMNS
 from tasks.baseline import move_pairs
 from vlr.controller import ROWS
 
@@ -39,8 +41,10 @@ def camera_only(env: Any, gain: float = 0.5):
         if len(du) < 3:
             return np.zeros(3)
         jac = np.linalg.lstsq(du, dm, rcond=None)[0].T          # (6, 3): dm = J du
-        err = np.asarray(obs["target"], dtype=float) - np.asarray(obs["pose"], dtype=float)
-        step = np.linalg.lstsq(jac[rows], err[rows], rcond=None)[0]
-        return gain * step
+        pose = np.asarray(obs["observation"], dtype=float)[:6]
+        target = pose.copy()
+        target[GOAL_COLUMNS[env.goal_rows]] = obs["desired_goal"]
+        step = np.linalg.lstsq(jac[rows], (target - pose)[rows], rcond=None)[0]
+        return np.clip(gain * step / env.max_step, -1.0, 1.0)
 
     return policy

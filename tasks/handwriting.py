@@ -39,7 +39,7 @@ class Waypoint:
 
 
 class HandwritingEnv(HandTaskEnv):
-    """`vlr/Handwriting-v0`: the POM writes `word` (default "SCIENCE") under the apple.
+    """`vlr/Handwriting-v1`: the POM writes `word` (default "SCIENCE") under the apple.
 
     Args (besides `HandTaskEnv`'s):
         word: letters to write (from `tasks.letters.STROKES`).
@@ -96,14 +96,16 @@ class HandwritingEnv(HandTaskEnv):
         pos, _ = self._target()
         return float(np.linalg.norm(np.asarray(self.observation.position) - pos))
 
-    def _task_step(self) -> tuple[float, bool]:
+    def _task_step(self) -> bool:
         self.steps_here += 1
         self._log_path()
         err = self._camera_error()
         if err <= self.tolerance or self.steps_here >= self.steps_per_waypoint:
             self._leave_waypoint(err)
-        done = self.index >= len(self.waypoints)
-        return -err * 1e3, done
+        return self.index >= len(self.waypoints)
+
+    def _goal_reached(self, pos_mm, rot_deg):
+        return pos_mm <= self.tolerance * 1e3
 
     def _leave_waypoint(self, camera_error: float) -> None:
         w = self.waypoints[self.index]

@@ -55,7 +55,7 @@ def axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 class MarbleMazeEnv(HandTaskEnv):
-    """`vlr/MarbleMaze-v0` (module docstring).
+    """`vlr/MarbleMaze-v1` (module docstring).
 
     Args (besides `HandTaskEnv`'s):
         tilt_deg: the plate's tilt for each run [deg].
@@ -68,6 +68,7 @@ class MarbleMazeEnv(HandTaskEnv):
     """
 
     object_name = "maze_holder"
+    goal_rows = "rotation"
     # A tendon whose step reverses takes half steps: seed 1's stick-slip chatter at the
     # band's edge (docs/TASKS.md) went from 1.73 to 0.69 degrees. No camera-fitted
     # correction: on the VLR that rolling contacts and the user's guess identify, the
@@ -140,13 +141,16 @@ class MarbleMazeEnv(HandTaskEnv):
         _, rot = self._target()
         return float(rotation_angle(np.asarray(self.observation.rotation), rot))
 
-    def _task_step(self) -> tuple[float, bool]:
+    def _task_step(self) -> bool:
         self.steps_here += 1
         self._log_marble()
         err = self._camera_error()
         if err <= self.tolerance or self.steps_here >= self.steps_per_run:
             self._hold(err)
-        return -float(np.degrees(err)), self.run >= len(self.targets)
+        return self.run >= len(self.targets)
+
+    def _goal_reached(self, pos_mm, rot_deg):
+        return rot_deg <= np.degrees(self.tolerance)
 
     def _hold(self, camera_error: float) -> None:
         """Record the run's error, hold the plate for `dwell`, go to the next run."""

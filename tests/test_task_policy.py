@@ -25,7 +25,7 @@ def make(env):
         seen["calls"] += 1
         seen["obs_keys"] = sorted(obs)
         log.write_text(json.dumps(seen))
-        return np.array([1e-4, 0.0, 0.0]) if seen["calls"] == 1 else np.zeros(3)
+        return np.array([0.25, 0.0, 0.0]) if seen["calls"] == 1 else np.zeros(3)
     return policy
 
 def short(env):
@@ -51,7 +51,8 @@ def test_a_users_policy_file_runs_in_place_of_the_baseline(tmp_path):
     seen = json.loads(path.with_suffix(".json").read_text())
     assert result["policy"] == f"{path}:make" and "controller" not in result
     assert result["steps"] == seen["calls"] >= 1
-    assert seen["has_filter"] and seen["obs_keys"] == ["pose", "target"]
+    assert seen["has_filter"]
+    assert seen["obs_keys"] == ["achieved_goal", "desired_goal", "observation"]
     assert "position_mm_mean" in result["errors"] and (out / "task.png").is_file()
 
 
@@ -69,7 +70,7 @@ def test_the_example_policies_run_and_name_themselves_in_the_summary(tmp_path):
     import tasks  # noqa: F401 - registers the environments
     from tasks.examples import camera_only
 
-    env = gym.make("vlr/Handwriting-v0", particles=200, identify_iterations=3, word="I")
+    env = gym.make("vlr/Handwriting-v1", particles=200, identify_iterations=3, word="I")
     try:
         obs, _ = env.reset(seed=0)
         policy = camera_only(env.unwrapped)

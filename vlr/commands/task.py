@@ -284,8 +284,9 @@ def load_policy_factory(spec: str):
 
 
 def _checked_action(action, spec: str, step: int):
-    """The policy's action as three finite floats [m]; UserError naming the policy, the step
-    and the value otherwise (not a reshape error from inside the environment)."""
+    """The policy's action as three finite floats (each tendon's change as a share of the
+    env's max_step, in [-1, 1]); UserError naming the policy, the step and the value
+    otherwise (not a reshape error from inside the environment)."""
     import numpy as np
 
     try:
@@ -294,7 +295,8 @@ def _checked_action(action, spec: str, step: int):
         a = None
     if a is None or a.shape != (3,) or not np.all(np.isfinite(a)):
         raise UserError(f"--policy {spec!r} returned {action!r} at step {step}: an action is "
-                        "the three tendon changes [m], finite numbers")
+                        "the three tendon changes as shares of max_step, finite numbers in "
+                        "[-1, 1]")
     return a
 
 
@@ -322,11 +324,10 @@ def run_seed(job: SeedRun) -> dict:
     t0 = time.perf_counter()
     bar = None
     try:
-        try:
-            obs, info = env.reset(seed=job.seed)
-        except FloatingPointError as exc:
-            raise UserError(f"the identification in reset failed ({exc}); try more "
-                            "--particles") from None
+        obs, info = env.reset(seed=job.seed)
+        if info["identification_failed"]:
+            raise UserError(f"the identification in reset failed "
+                            f"({info['identification_failed']}); try more --particles")
         t_identified = time.perf_counter()
         if job.policy is None:
             policy = env.unwrapped.baseline(**job.changes)   # the policy ships with the env
