@@ -15,6 +15,7 @@ def test_bench_writes_median_seconds_per_particle_count(tmp_path):
     assert set(seconds) == {"200", "400"}
     assert all(0 < v < 60 for v in seconds.values())
     assert data["medians"]["200"]["total"] == seconds["200"]
+    assert data["threads"] >= 1
 
 
 def test_bench_times_the_pinned_model_on_request(tmp_path):
@@ -35,6 +36,7 @@ def test_bench_rejects_bad_counts(tmp_path, capsys):
     out = tmp_path / "bench.json"
     assert main(["bench", "--particles", "0", "--json", str(out)]) == 2
     assert main(["bench", "--repeats", "0", "--json", str(out)]) == 2
+    assert main(["bench", "--threads", "0", "--json", str(out)]) == 2
     err = capsys.readouterr().err
     assert "--particles 0" in err and "--repeats 0" in err and "Traceback" not in err
     assert not out.exists()

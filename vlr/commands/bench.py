@@ -42,6 +42,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     p.add_argument("--profile", action="store_true",
                    help="also Newton iterations, failures and follow-ups, and the cost per "
                         "energy term")
+    p.add_argument("--threads", type=int, default=None,
+                   help="numba threads of the particle kernels (default: every core)")
     p.set_defaults(func=run)
 
 
@@ -150,12 +152,19 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--particles {bad[0]} must be >= 10")
     if args.repeats < 1:
         raise UserError(f"--repeats {args.repeats} must be >= 1")
+    import numba
+
+    cores = numba.config.NUMBA_NUM_THREADS
+    if args.threads is not None and not 1 <= args.threads <= cores:
+        raise UserError(f"--threads {args.threads} must be 1..{cores} (the cores numba has)")
+    numba.set_num_threads(args.threads or cores)
     from vlr._energy_kernels import solve_path_batch  # noqa: F401  (compile/load the cache)
     from vlr.io import write_json_atomic
 
     results: dict[int, dict[str, float]] = {}
     print(f"{args.contacts} contacts, the synthetic world holding the apple, the sim's "
-          "filter settings; seconds are medians over the iterations")
+          f"filter settings, {numba.get_num_threads()} of {cores} threads; seconds are "
+          "medians over the iterations")
     print(f"{'particles':>10} " + " ".join(f"{k:>11}" for k in (*PHASES, "total"))
           + f" {'yardstick':>10} {'ratio':>6}   Newton iterations (action, settle)")
     for n in args.particles:
@@ -188,6 +197,7 @@ def run(args: argparse.Namespace) -> int:
     if args.json is not None:
         write_json_atomic(args.json, {
             "contacts": args.contacts,
+            "threads": numba.get_num_threads(),
             "seconds_per_iteration": {str(n): r["total"] for n, r in results.items()},
             "yardstick_seconds": {str(n): r["yardstick"] for n, r in results.items()},
             "ratio_to_yardstick": {str(n): r["ratio"] for n, r in results.items()},
