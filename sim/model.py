@@ -19,7 +19,6 @@ import mujoco
 import numpy as np
 from dm_control import mjcf
 
-import models
 from models.make_tags import TEXTURE_PER_BLACK, tag_path, write_tag
 from sim.pads import ROLL_FRICTION, SLIDE_FRICTION, TORSION_FRICTION
 from vlr.spec import FingerSpec, HandSpec, ObjectSpec, SpecError
@@ -33,6 +32,9 @@ NOSLIP_ITERATIONS = 10
 TENDON_DAMPING = 40.0       # N s/m on the tendon actuator: servo velocity loop, see README
 TENDON_FORCE_MAX = 60.0     # N; XM430 stall torque 4.1 N m on a 10 mm spool is ~400 N, the
                             # line's working load is far lower; 60 N bounds the model
+# The servo's accepted tendon pull [m] from the open-hand zero: the sim's commands
+# (sim/backend.py COMMAND_RANGE, -2 to 40 mm) with a margin, so no command is ever clamped.
+TENDON_PULL_RANGE = (-0.005, 0.045)
 JOINT_DAMPING = 0.002       # N m s/rad: bushing friction
 JOINT_ARMATURE = 1e-5       # kg m^2: keeps the light links well conditioned at 1 ms
 
@@ -137,6 +139,20 @@ def _mesh_file(path: str):
 
 def _box_inertia(m: float, x: float, y: float, z: float) -> list[float]:
     return [m * (y * y + z * z) / 12, m * (x * x + z * z) / 12, m * (x * x + y * y) / 12]
+
+
+def open_tendon_length(spec: FingerSpec) -> float:
+    """The fixed tendon's length [m] with both joints on their open stops: the zero of the
+    spool's pull."""
+    return -float(np.dot(spec.pulley_radii, spec.open_angles))
+
+
+def tendon_ctrlrange(spec: FingerSpec) -> tuple[float, float]:
+    """The tendon actuator's control range [m of tendon length]: a control is a length target,
+    the open-hand length less the spool's pull, so the range is that length less
+    `TENDON_PULL_RANGE`."""
+    l_open = open_tendon_length(spec)
+    return l_open - TENDON_PULL_RANGE[1], l_open - TENDON_PULL_RANGE[0]
 
 
 def build_palm(hand: HandSpec, width: int = 640, height: int = 480,
@@ -332,7 +348,7 @@ def build_hand(hand: HandSpec, *, width: int = 640, height: int = 480,
         root.actuator.add("position", name=f"{m.slot}_tendon_act", tendon=f"{m.slot}/tendon",
                           kp=hand.tendon_stiffness, kv=TENDON_DAMPING,
                           forcerange=[-TENDON_FORCE_MAX, 0], forcelimited=True,
-                          ctrlrange=[-1.0, 1.0], ctrllimited=True)
+                          ctrlrange=list(tendon_ctrlrange(m.finger)), ctrllimited=True)
     return root
 
 
@@ -373,15 +389,3 @@ def load_scene(hand: str, obj: str, *, width: int = 640, height: int = 480,
                fovy_deg: float = CAMERA_FOVY_DEG) -> BuiltModel:
     """Build (cached) the scene of a named hand and object."""
     return _cached(str(hand), str(obj), width, height, float(fovy_deg))
-
-
-def write_scene_files(folder: str | Path | None = None) -> Path:
-    """Write the Model O holding the apple as MJCF with its meshes and textures beside it
-    (default folder models/scene_modelo_apple/), for users who open MJCF directly; returns
-    the XML's path. The XML alone would not load: it names its assets by content hash."""
-    from vlr.spec import load_hand, load_object
-
-    out = Path(folder) if folder is not None else models.ROOT / "scene_modelo_apple"
-    root = build_scene(load_hand("modelo"), load_object("apple"))
-    mjcf.export_with_assets(root, str(out), "scene_modelo_apple.xml")
-    return out / "scene_modelo_apple.xml"

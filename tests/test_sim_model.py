@@ -106,10 +106,3 @@ def test_scene_steps_one_second_under_noisy_controls_without_warnings(obj):
         mujoco.mj_step(m, d)
     assert all(w.number == 0 for w in d.warning)
     assert np.all(np.isfinite(d.qpos))
-
-
-def test_scene_files_load_on_their_own(tmp_path):
-    from sim.model import write_scene_files
-
-    model = mujoco.MjModel.from_xml_path(str(write_scene_files(tmp_path)))
-    assert model.nmesh > 0 and model.ntex == 1  # meshes and the tag texture beside the XML
