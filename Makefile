@@ -3,19 +3,19 @@ PY ?= python3
 VENV := .venv
 BIN := $(VENV)/bin
 
-.PHONY: setup install identify test lint
+.PHONY: setup install demo test lint
 
-setup: install identify
+setup: install demo
 
 install:
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
-	$(BIN)/pip install -q -c constraints.txt -e '.[dev,cluster]'
+	$(BIN)/pip install -q -c constraints.txt -e '.[all]'
 
-# The main job on the embedded defaults: the sim identifies its grasp of the apple.
-identify:
-	$(BIN)/vlr identify --object apple --particles 6000 --max-iterations 10 --quiet \
-		--out runs/setup
+# The main job on the embedded defaults, on a budget of seconds: the sim identifies its grasp
+# of the apple and prints the estimates beside the truth, then the commands to try next.
+demo:
+	$(BIN)/vlr demo --out runs/setup
 
 test:
 	$(BIN)/python -m pytest -q

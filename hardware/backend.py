@@ -26,8 +26,8 @@ from __future__ import annotations
 
 import atexit
 import contextlib
+import logging
 import signal
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterator
@@ -59,9 +59,7 @@ from vlr.errors import Interrupted
 from vlr.hand import ApplyReport, Frame, GraspError, check_delta
 from vlr.spec import HandSpec, ObjectSpec, load_hand, load_object
 
-
-def _log(message: str) -> None:
-    print(f"[hardware] {message}", file=sys.stderr)
+_LOG = logging.getLogger(__name__)
 
 
 class HardwareHand:
@@ -77,19 +75,21 @@ class HardwareHand:
         camera: the frame source.
         port: serial port overriding config.bus.port (the emulator's pty in a dry run).
         on_close: callables run last by `close()` (e.g. stopping an emulator).
-        log: where progress messages go.
+        log: where progress messages go (default: this module's logger at INFO, warnings
+            at WARNING; `vlr.logs` prints them as "[hardware] ..." lines).
     """
 
     def __init__(self, config: HardwareConfig, *, spec: HandSpec, object_spec: ObjectSpec,
                  calibration: CameraCalibration, camera: FrameSource, port: str | None = None,
                  on_close: tuple[Callable[[], None], ...] = (),
-                 log: Callable[[str], None] = _log) -> None:
+                 log: Callable[[str], None] | None = None) -> None:
         self.config = config
         self._spec = spec
         self._object = object_spec
         self._calibration = calibration
         self.camera = camera
-        self.log = log
+        self.log = log or _LOG.info
+        self.warn = _LOG.warning if log is None else (lambda message: log(f"WARNING: {message}"))
         self._on_close = on_close
         self._closed = False
         self._stopped = ""  # why the hand was stopped, if it was
@@ -201,7 +201,7 @@ class HardwareHand:
         try:
             if self.bus.connected:
                 for problem in self.bus.torque_off_everywhere(self.config.ids):
-                    self.log(f"WARNING: {problem}")
+                    self.warn(problem)
         finally:
             self.bus.close()
             with contextlib.suppress(Exception):
@@ -395,7 +395,7 @@ class HardwareHand:
             self._stopped = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
             if self.bus.connected:
                 for problem in self.bus.torque_off_everywhere(self.config.ids):
-                    self.log(f"WARNING: {problem}")
+                    self.warn(problem)
             raise
 
     def _grasp_status(self) -> tuple[bool, str]:

@@ -36,33 +36,39 @@ import os
 import time
 from collections.abc import Iterable, Mapping, Sequence
 
-import serial
-from dynamixel_sdk import (
-    COMM_RX_CORRUPT,
-    COMM_RX_TIMEOUT,
-    COMM_SUCCESS,
-    GroupSyncWrite,
-    PacketHandler,
-    PortHandler,
-)
-from dynamixel_sdk.protocol2_packet_handler import (
-    PKT_ERROR,
-    PKT_ID,
-    PKT_INSTRUCTION,
-    PKT_LENGTH_H,
-    PKT_LENGTH_L,
-    PKT_PARAMETER0,
-)
-
 from hardware.control_table import (
     ALERT_BIT,
     MODEL_NUMBERS,
+    SDK_BAUD_RATES,
     Reg,
     describe_hardware_error,
     describe_status_error,
 )
+from hardware.errors import HardwareError
 from hardware.protocol2 import BROADCAST_ID, Instruction
-from vlr.errors import UserError
+from vlr.errors import MissingExtra
+
+try:
+    import serial
+    from dynamixel_sdk import (
+        COMM_RX_CORRUPT,
+        COMM_RX_TIMEOUT,
+        COMM_SUCCESS,
+        GroupSyncWrite,
+        PacketHandler,
+        PortHandler,
+    )
+    from dynamixel_sdk.protocol2_packet_handler import (
+        PKT_ERROR,
+        PKT_ID,
+        PKT_INSTRUCTION,
+        PKT_LENGTH_H,
+        PKT_LENGTH_L,
+        PKT_PARAMETER0,
+    )
+except ImportError as exc:  # a core install: the sim runs, the real hand does not
+    package = "pyserial" if exc.name == "serial" else "dynamixel-sdk"  # as pip names them
+    raise MissingExtra(package, "hardware", "the real hand's motor bus") from exc
 
 log = logging.getLogger(__name__)
 
@@ -73,15 +79,6 @@ STATUS_OVERHEAD = 11
 #: The markers of `MotorBus._resync` read this many bytes from address 0, plus a counter
 #: modulo MARKER_LENGTHS: lengths no other request reads, each unlike the last few markers'.
 MARKER_BASE, MARKER_LENGTHS = 40, 16
-
-#: Baud rates the SDK accepts (it refuses others before touching the port).
-SDK_BAUD_RATES = (9_600, 19_200, 38_400, 57_600, 115_200, 230_400, 460_800, 500_000, 576_000,
-                  921_600, 1_000_000, 1_152_000, 2_000_000, 2_500_000, 3_000_000, 3_500_000,
-                  4_000_000)
-
-
-class HardwareError(UserError):
-    """A hardware problem the user can fix (port, cable, power, motor id, motor fault)."""
 
 
 class PortError(HardwareError):

@@ -11,7 +11,7 @@ from typing import Protocol
 
 import numpy as np
 
-from hardware.bus import HardwareError
+from hardware.errors import HardwareError
 
 
 class CameraError(HardwareError):

@@ -13,8 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
 
-from hardware.bus import SDK_BAUD_RATES
-from hardware.control_table import EXTENDED_POSITION_LIMIT, OperatingMode
+from hardware.control_table import EXTENDED_POSITION_LIMIT, SDK_BAUD_RATES, OperatingMode
 from vlr.spec import SpecError, load_hand, load_object, load_yaml_mapping
 
 #: `bus.port` value that runs the bus against an in-process emulator (a dry run).

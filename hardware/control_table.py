@@ -12,6 +12,12 @@ from __future__ import annotations
 
 from enum import Enum, IntEnum, IntFlag
 
+#: Baud rates the SDK accepts (it refuses others before touching the port); here, so that a
+#: config is checked without the SDK installed.
+SDK_BAUD_RATES = (9_600, 19_200, 38_400, 57_600, 115_200, 230_400, 460_800, 500_000, 576_000,
+                  921_600, 1_000_000, 1_152_000, 2_000_000, 2_500_000, 3_000_000, 3_500_000,
+                  4_000_000)
+
 MANUAL_URL = "https://emanual.robotis.com/docs/en/dxl/x/xm430-w350/#control-table"
 
 #: Addresses below this are EEPROM: writable only while torque is off (access error 7).

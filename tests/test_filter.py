@@ -2,7 +2,6 @@
 
 import numpy as np
 import pytest
-from filterpy.monte_carlo import resampling as fp_resampling
 
 from vlr.filter import (
     FilterConfig,
@@ -31,13 +30,21 @@ def config(particles: int, **kw) -> FilterConfig:
     return FilterConfig(particles=particles, **kw)
 
 
+@pytest.fixture
+def fp_resampling():
+    """filterpy's resampling module, the oracle (a `dev` extra, test-only)."""
+    filterpy = pytest.importorskip("filterpy.monte_carlo.resampling",
+                                   reason="filterpy is not installed (pip install -e '.[dev]')")
+    return filterpy
+
+
 @pytest.fixture(scope="module")
 def modelo() -> HandModel:
     return HandModel.from_spec(load_hand("modelo"))
 
 
 @pytest.mark.parametrize("offset", [0.0, 0.37, 0.999999])
-def test_resampler_agrees_with_filterpy(monkeypatch, offset):
+def test_resampler_agrees_with_filterpy(monkeypatch, offset, fp_resampling):
     rng = np.random.default_rng(3)
     w = rng.random(500)
     w /= w.sum()
@@ -46,7 +53,7 @@ def test_resampler_agrees_with_filterpy(monkeypatch, offset):
     np.testing.assert_array_equal(systematic_resample(w, offset=offset), expected)
 
 
-def test_resampler_never_indexes_past_the_end(monkeypatch):
+def test_resampler_never_indexes_past_the_end(monkeypatch, fp_resampling):
     w = np.full(1000, 1.0 / 1000) * (1 - 1e-9)  # cumulative sum ends below 1
     idx = systematic_resample(w, offset=0.9999999999)
     assert idx.shape == (1000,) and idx.max() == 999

@@ -12,13 +12,16 @@ import time
 import numpy as np
 import pytest
 
-from hardware.backend import HardwareHand, open_hand
-from hardware.bus import CommError, MotorFaultError, PortError
-from hardware.calibration import CalibrationError
-from hardware.camera import CameraError, FakeCamera, OpenCVCamera
-from hardware.control_table import CURRENT_UNIT_MA, HardwareError, Reg
-from hardware.tendons import TendonMap, resolve_zero
-from tests.hardware_fixtures import (
+pytest.importorskip("dynamixel_sdk", reason="the real hand's tests need the hardware extra "
+                    "(pip install -e '.[hardware]')")
+
+from hardware.backend import HardwareHand, open_hand  # noqa: E402
+from hardware.bus import CommError, MotorFaultError, PortError  # noqa: E402
+from hardware.calibration import CalibrationError  # noqa: E402
+from hardware.camera import CameraError, FakeCamera, OpenCVCamera  # noqa: E402
+from hardware.control_table import CURRENT_UNIT_MA, HardwareError, Reg  # noqa: E402
+from hardware.tendons import TendonMap, resolve_zero  # noqa: E402
+from tests.hardware_fixtures import (  # noqa: E402
     CALIBRATION,
     OBJECT,
     config_dict,
@@ -26,8 +29,8 @@ from tests.hardware_fixtures import (
     make_config,
     write_config,
 )
-from vlr.hand import CommandError, Hand
-from vlr.spec import load_hand
+from vlr.hand import CommandError, Hand  # noqa: E402
+from vlr.spec import load_hand  # noqa: E402
 
 PER_METRE = 4096 / (2 * math.pi * 0.01)  # ticks per metre of tendon on the 10 mm spool
 STORED = {"thumb": {"id": 1, "direction": 1, "zero": 2300},

@@ -19,12 +19,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from hardware.bus import CommError, HardwareError, MotorBus, MotorFaultError
-from hardware.control_table import Reg
-from hardware.emulator import Emulator
-from hardware.protocol2 import Instruction
-from tests.hardware_fixtures import config_dict, hand_on_emulator, make_config, write_config
-from vlr.cli import main
+pytest.importorskip("dynamixel_sdk", reason="the real hand's tests need the hardware extra "
+                    "(pip install -e '.[hardware]')")
+
+from hardware.bus import CommError, HardwareError, MotorBus, MotorFaultError  # noqa: E402
+from hardware.control_table import Reg  # noqa: E402
+from hardware.emulator import Emulator  # noqa: E402
+from hardware.protocol2 import Instruction  # noqa: E402
+from tests.hardware_fixtures import config_dict, hand_on_emulator, make_config, write_config  # noqa: E402
+from vlr.cli import main  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 PER_METRE = 4096 / (2 * math.pi * 0.01)  # ticks per metre of tendon on the 10 mm spool

@@ -12,6 +12,8 @@ import numpy as np
 import pytest
 
 pytest.importorskip("sim.backend")
+pytest.importorskip("dynamixel_sdk", reason="the real hand's tests need the hardware extra "
+                    "(pip install -e '.[hardware]')")
 
 from hardware.backend import open_hand  # noqa: E402
 from hardware.control_table import Reg  # noqa: E402

@@ -1,5 +1,6 @@
 """The live 3D view (vlr.view): geometry, server lifecycle, and what headless Chromium shows."""
 
+import importlib.util
 import subprocess
 import sys
 
@@ -15,6 +16,10 @@ from vlr.motion import MotionConfig, ObjectParams
 from vlr.spec import load_hand, load_object
 from vlr.synthetic import SyntheticConfig, SyntheticWorld, nominal_grasp
 from vlr.view import COLORS, FilterView, find_chromium, hypotheses, screenshot
+
+# The server tests need the `view` extra; the geometry and the headless path do not.
+needs_meshcat = pytest.mark.skipif(importlib.util.find_spec("meshcat") is None,
+                                   reason="meshcat is not installed (pip install -e '.[view]')")
 
 
 def _model():
@@ -59,6 +64,7 @@ def _trial(view: FilterView, iterations: int = 3, particles: int = 1500) -> None
              LoopConfig(max_iterations=iterations), seed=1, watch=view)
 
 
+@needs_meshcat
 def test_view_serves_exports_and_always_stops_its_server(tmp_path):
     with pytest.raises(RuntimeError, match="boom"), FilterView(_model()) as v:
         proc = v.server_process
@@ -86,6 +92,16 @@ def test_headless_identify_never_imports_meshcat(tmp_path):
     assert (tmp_path / "particles.png").stat().st_size > 1000
 
 
+def test_view_without_meshcat_names_the_extra_in_one_line(tmp_path, monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "meshcat", None)  # `import meshcat` raises ImportError
+    rc = main(["identify", "--backend", "synthetic", "--particles", "200", "--max-iterations",
+               "1", "--out", str(tmp_path), "--quiet", "--view"])
+    assert rc == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "the 3D view needs meshcat" in err[0] and ".[view]" in err[0], err
+
+
+@needs_meshcat
 def test_identify_view_flags_serve_then_save_and_stop(tmp_path, monkeypatch, capsys):
     views = []
     init = FilterView.__init__
@@ -137,6 +153,7 @@ def chromium():
     return exe
 
 
+@needs_meshcat
 def test_live_view_and_static_page_draw_in_headless_chromium(chromium, tmp_path):
     with FilterView(_model(), obj=load_object("apple"), sample=1000) as v:
         _trial(v)

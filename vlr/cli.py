@@ -25,6 +25,12 @@ COMMAND_GROUP = "vlr.commands"
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="vlr", description="Self-identification of hand-object systems with VLRs.")
+    # Their own dests: a subcommand's defaults overwrite the namespace's values of the same
+    # name, and several subcommands have a --quiet (no progress bar) of their own.
+    parser.add_argument("-v", "--verbose", dest="log_verbose", action="count", default=0,
+                        help="log more: DEBUG lines on stderr (before the command: vlr -v ...)")
+    parser.add_argument("-q", dest="log_quiet", action="count", default=0,
+                        help="log less: warnings and errors only (-qq: errors only)")
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
     eps = sorted(entry_points(group=COMMAND_GROUP), key=lambda ep: ep.name)
     for ep in eps:
@@ -44,10 +50,12 @@ def _unavailable(exc: Exception) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     from vlr.hand import CommandError, GraspError
+    from vlr.logs import configure, level_for
     from vlr.spec import SpecError
 
     parser = build_parser()
     args = parser.parse_args(argv)
+    configure(level_for(args.log_verbose, args.log_quiet))
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

@@ -14,6 +14,7 @@
 
 from __future__ import annotations
 
+import logging
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -26,6 +27,8 @@ from vlr.settings import Settings
 from vlr.world import World, open_world
 
 __all__ = ["Identification", "run_identification"]
+
+_LOG = logging.getLogger(__name__)
 
 
 @dataclass
@@ -98,9 +101,16 @@ def run_identification(settings: Settings, *, progress: Callable | None = None,
     t0 = time.perf_counter()
     own = world is None
     w = open_world(settings) if own else world
+    _LOG.debug("%s world open: %s holding %s; %d particles, at most %d actions",
+               settings.world.backend, w.hand_spec.name, w.object_spec.name,
+               settings.filter.particles, settings.loop.max_iterations)
     box: dict[str, Any] = {}
 
     def watching(pf, rec) -> None:
+        # A line per update for `vlr -v`: the progress of a run without a bar (--quiet, a
+        # sweep's worker, a log file).
+        _LOG.debug("iteration %d: mean 95%% interval %.2f deg, ESS %.0f", rec.iteration,
+                   rec.ci_deg, rec.ess)
         box["pf"] = pf
         if watch is not None:
             watch(pf, rec)
@@ -119,8 +129,10 @@ def run_identification(settings: Settings, *, progress: Callable | None = None,
     finally:
         if own:
             w.close()
-    summary = summarize(result, w.model, settings, time.perf_counter() - t0,
-                        truths[-1] if truths else None)
+    wall = time.perf_counter() - t0
+    _LOG.debug("identification done in %.1f s: %d actions, converged %s", wall,
+               result.iterations, result.converged)
+    summary = summarize(result, w.model, settings, wall, truths[-1] if truths else None)
     summary["settings"] = settings.flat()
     # What ran: a backend may hold another hand or object than the settings name (the real
     # hand's config names its own).

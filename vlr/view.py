@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from vlr.errors import MissingExtra
 from vlr.kinematics import HandModel, contact_points, joint_positions
 
 __all__ = ["COLORS", "Hypotheses", "hypotheses", "FilterView", "find_chromium", "screenshot"]
@@ -137,8 +138,11 @@ def _meshcat() -> Any:
     # meshcat's business, and a test run with -W error must not fail on it.
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", DeprecationWarning)
-        import meshcat
-        import meshcat.geometry  # noqa: F401
+        try:
+            import meshcat
+            import meshcat.geometry  # noqa: F401
+        except ImportError as exc:
+            raise MissingExtra(exc.name or "meshcat", "view", "the 3D view") from exc
     return meshcat
 
 

@@ -15,10 +15,13 @@ are rebuilt from those files, also by `vlr sweep FILE --table-only`.
 from __future__ import annotations
 
 import argparse
+import logging
 import time
 from pathlib import Path
 
 from vlr.errors import UserError
+
+_LOG = logging.getLogger(__name__)
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -111,6 +114,7 @@ def run(args: argparse.Namespace) -> int:
 
     def on_done(rec: dict) -> None:
         nonlocal failed
+        _LOG.debug("trial %s: %s", rec["id"], rec["status"])
         if rec["status"] != "ok":
             failed += 1
             msg = f"trial {rec['id']} failed: {rec['error']}"

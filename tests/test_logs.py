@@ -1,0 +1,59 @@
+"""`vlr -v` / `-q` and the project's log lines (`vlr.logs`); a missing extra named in one line."""
+
+import logging
+import sys
+
+import pytest
+
+from vlr.backends import get_backend
+from vlr.cli import main
+from vlr.logs import configure, level_for
+
+
+@pytest.fixture(autouse=True)
+def _restore_levels():
+    yield
+    configure(logging.INFO)  # as `vlr` leaves them, whatever a test set
+
+
+def test_flags_set_the_level():
+    assert level_for() == logging.INFO
+    assert level_for(verbose=1) == logging.DEBUG
+    assert level_for(quiet=1) == logging.WARNING
+    assert level_for(quiet=2) == logging.ERROR
+
+
+def test_lines_keep_the_hardware_prefix(capsys):
+    configure(logging.INFO)
+    logging.getLogger("hardware.backend").info("tendon zeros found")
+    logging.getLogger("hardware.backend").warning("motor 2 did not confirm torque off")
+    logging.getLogger("hardware.backend").debug("not shown")
+    assert capsys.readouterr().err.splitlines() == [
+        "[hardware] tendon zeros found",
+        "[hardware] WARNING: motor 2 did not confirm torque off"]
+
+
+def test_verbose_identify_logs_each_iteration_and_quiet_logs_nothing(tmp_path, capsys):
+    args = ["identify", "--backend", "synthetic", "--particles", "200", "--max-iterations",
+            "1", "--quiet", "--out", str(tmp_path)]
+    assert main(["-v", *args]) == 0
+    err = capsys.readouterr().err
+    assert "[vlr.run] iteration 1: mean 95% interval" in err
+    assert main(["-q", *args]) == 0
+    assert capsys.readouterr().err == ""
+
+
+def test_the_hardware_backend_without_its_extra_is_one_line(tmp_path, monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "dynamixel_sdk", None)  # `import` raises ImportError
+    for name in ("hardware.backend", "hardware.bus", "hardware.calibration",
+                 "hardware.tendons"):
+        monkeypatch.delitem(sys.modules, name, raising=False)
+    get_backend.cache_clear()
+    try:
+        rc = main(["identify", "--backend", "hardware", "--config", "my_hand.yaml",
+                   "--out", str(tmp_path / "o")])
+    finally:
+        get_backend.cache_clear()
+    assert rc == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "needs dynamixel-sdk" in err[0] and ".[hardware]" in err[0], err
