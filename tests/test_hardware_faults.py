@@ -224,7 +224,10 @@ def test_a_signal_ends_a_run_with_one_line_and_torque_off(tmp_path, signals):
         for sig in signals:
             os.kill(run.pid, sig)
             time.sleep(0.01)
-        _, err = run.communicate(timeout=30)
+        # Wait with stdin still open: closed, the prompt would read the end of its input.
+        run.wait(timeout=30)
+        err = run.stderr.read()
+        run.stdin.close()
         assert run.returncode == 128 + signals[0], err
         assert err.strip().splitlines() == ["vlr tension-calibrate: interrupted"], err
         assert not out.exists()
