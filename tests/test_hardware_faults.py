@@ -190,6 +190,14 @@ def test_a_motor_that_never_takes_its_goal_stops_the_run_naming_it(tmp_path):
 
 # ----------------------------------------------------------------- signals
 
+def _default_signals() -> None:
+    """In the child: the signals' default actions. A run started under nohup, or in the
+    background of a script, inherits SIGHUP or SIGINT ignored, and the hand leaves a signal
+    its program ignores alone."""
+    for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_DFL)
+
+
 def _emulate(config: Path) -> tuple[subprocess.Popen, str]:
     """`vlr emulate` in its own process; returns it and the port it serves."""
     proc = subprocess.Popen([sys.executable, "-m", "vlr.cli", "emulate", "--config",
@@ -215,7 +223,8 @@ def test_a_signal_ends_a_run_with_one_line_and_torque_off(tmp_path, signals):
         run = subprocess.Popen([sys.executable, "-m", "vlr.cli", "tension-calibrate",
                                 "--config", str(path), "--out", str(out)],
                                stdin=subprocess.PIPE, stdout=subprocess.PIPE,
-                               stderr=subprocess.PIPE, text=True, cwd=ROOT)
+                               stderr=subprocess.PIPE, text=True, cwd=ROOT,
+                               preexec_fn=_default_signals)
         seen = ""
         while "tensions on the" not in seen:  # the prompt: the hand is closed, torque on
             char = run.stdout.read(1)
