@@ -48,7 +48,7 @@ from vlr.camera import (
     pose_to_matrix,
 )
 from vlr.errors import UserError
-from vlr.io import atomic_path
+from vlr.io import atomic_path, read_line
 from vlr.perception import detect_tags, observe, to_gray
 
 __all__ = ["BoardSpec", "BoardView", "Coverage", "IntrinsicsFit", "board_image", "calibrate",
@@ -339,7 +339,8 @@ def camera_pose_from_tags(poses_cam_tag: Sequence[np.ndarray], T_palm_tag: np.nd
 def _live_tag_poses(camera, K, dist, tag_id: int, tag_size: float, frames: int,
                     clock: Callable[[], float] = time.monotonic) -> list[np.ndarray]:
     try:
-        input(f"put tag {tag_id} at its --tag-pose in view of the camera, then press Enter: ")
+        read_line(f"put tag {tag_id} at its --tag-pose in view of the camera, then press "
+                  "Enter: ")
     except EOFError:  # no terminal (a script): look for the tag straight away
         print()
     poses: list[np.ndarray] = []

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from hardware.config import TensionConfig
+from vlr.io import read_line
 
 #: Tendon commands about the grasp at which the currents are read [mm] (default).
 DEFAULT_PULLS_MM = (-0.2, 0.0, 0.2, 0.4, 0.6)
@@ -130,14 +131,14 @@ def _move_to(hand, target: np.ndarray) -> None:
 def prompt_tensions(names: Sequence[str], ask: Callable[[str], str] | None = None
                     ) -> Callable[[np.ndarray], np.ndarray]:
     """A reader that asks the user for the load cells' tensions, one line per reading
-    (`ask`: how to ask; default the terminal's `input`)."""
+    (`ask`: how to ask; default the terminal, `vlr.io.read_line`)."""
 
     def read(commands: np.ndarray) -> np.ndarray:
         mm = ", ".join(f"{u * 1e3:.2f}" for u in commands)
         while True:
             try:
-                text = (ask or input)(f"commands [{mm}] mm; tensions on the "
-                                      f"{', '.join(names)} lines [N]: ")
+                text = (ask or read_line)(f"commands [{mm}] mm; tensions on the "
+                                          f"{', '.join(names)} lines [N]: ")
             except EOFError:
                 raise CalibrationInputError("no load-cell reading given (input ended): "
                                             "the calibration needs one per pull") from None

@@ -8,8 +8,11 @@ and mkstemp's 0600 would hide them on a shared filesystem.
 
 from __future__ import annotations
 
+import builtins
 import json
 import os
+import select
+import sys
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -18,7 +21,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["atomic_path", "write_text_atomic", "write_json_atomic"]
+__all__ = ["atomic_path", "write_text_atomic", "write_json_atomic", "read_line"]
+
+_STDIN_PENDING = bytearray()   # bytes read from stdin past the last line returned
 
 
 def _default(o: Any) -> Any:
@@ -73,3 +78,30 @@ def write_json_atomic(path: str | Path, data: Any) -> None:
     (temp file in the same folder, then rename)."""
     text = json.dumps(_strict(data), indent=2, default=_default, allow_nan=False)
     write_text_atomic(path, text + "\n")
+
+
+def read_line(prompt: str) -> str:
+    """`input(prompt)` that a signal can interrupt: the wait for the line is in short
+    `select`s, so the main thread returns to Python often. A signal the kernel delivers to
+    another thread (numba's, BLAS's) only sets a flag that the main thread acts on when it
+    runs Python, and a plain `input` blocked in read() would never see it; a run waiting at
+    a prompt with torque on must still end on SIGTERM. Where stdin has no file descriptor
+    (captured), this is `input`. Raises EOFError at the end of the input."""
+    try:
+        fd = sys.stdin.fileno()
+    except (AttributeError, OSError, ValueError):
+        return builtins.input(prompt)
+    sys.stdout.write(prompt)
+    sys.stdout.flush()
+    while b"\n" not in _STDIN_PENDING:
+        if not select.select([fd], [], [], 0.1)[0]:
+            continue
+        chunk = os.read(fd, 4096)
+        if not chunk:
+            if not _STDIN_PENDING:
+                raise EOFError
+            break
+        _STDIN_PENDING.extend(chunk)
+    line, _, rest = bytes(_STDIN_PENDING).partition(b"\n")
+    _STDIN_PENDING[:] = rest
+    return line.decode(errors="replace").rstrip("\r")
