@@ -31,7 +31,6 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -483,39 +482,6 @@ def open_hand(*, config: str, **ignored: Any) -> HardwareHand:
         raise
     return HardwareHand(cfg, spec=spec, object_spec=object_spec, calibration=calibration,
                         camera=camera, port=port, on_close=tuple(reversed(on_close)))
-
-
-@dataclass(frozen=True)
-class HardwareWorldOptions:
-    """The real hand's `world.options` (`vlr.backends`).
-
-    Attributes:
-        config: the hardware YAML file (hardware/README.md): ports, motor ids, the camera,
-            the object grasped and the hand.
-    """
-
-    config: str | None = None
-
-
-def _open_configured(*, config: str | None = None, **ignored: Any) -> HardwareHand:
-    if not config:
-        raise HardwareError("the hardware backend needs its config file: --config FILE "
-                            "(world.options.config; hardware/README.md)")
-    return open_hand(config=config)
-
-
-def _backend():
-    from vlr.backends import Backend
-
-    # The real hand runs at the dataclasses' defaults: rolling contacts, the surface contact
-    # prior, 0.5 mm / 1 degree likelihood scales (its model-world gap is not measured), hard
-    # plastic stops at 100 N m/rad, the generic grasp guess (give yours:
-    # filter.guess_theta_deg).
-    return Backend(name="hardware", options=HardwareWorldOptions, open_hand=_open_configured,
-                   builds_hand=False)
-
-
-BACKEND = _backend()
 
 
 def _camera(cfg: HardwareConfig, calibration: CameraCalibration, plant: Any) -> FrameSource:

@@ -2,22 +2,19 @@
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import pytest
 
 from hardware.config import HardwareConfigError, load_config
 from hardware.control_table import OperatingMode
+from tests.extras import needs_hardware
 from tests.hardware_fixtures import config_dict, write_config
 from vlr.spec import SpecError
 
 ROOT = Path(__file__).resolve().parents[1]
 
-# The configs load without the DYNAMIXEL SDK; the hardware backend does not.
-needs_sdk = pytest.mark.skipif(importlib.util.find_spec("dynamixel_sdk") is None,
-                               reason="the hardware backend needs the hardware extra "
-                               "(pip install -e '.[hardware]')")
+
 
 
 def test_example_config_loads():
@@ -111,7 +108,7 @@ def test_cli_prints_config_errors_in_one_line(tmp_path, capsys):
     assert "Traceback" not in err
 
 
-@needs_sdk
+@needs_hardware
 def test_cli_prints_a_bad_camera_calibration_in_one_line(tmp_path, capsys):
     from vlr.cli import main
 

@@ -5,6 +5,7 @@ import json
 import numpy as np
 import pytest
 
+from tests.extras import needs_hardware
 from vlr.cli import main
 
 
@@ -176,6 +177,7 @@ def test_identify_bad_input_is_one_clear_line(tmp_path, capsys):
     assert not (tmp_path / "result.json").exists()
 
 
+@needs_hardware
 def test_identify_hardware_backend_against_emulated_motors_and_sim(tmp_path):
     """The whole hardware path: SDK packets on a pty, emulated XM430s driving the MuJoCo hand,
     its rendered frames through the fake camera, into the same filter."""

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import models
+from tests.extras import needs_hardware
 from vlr.cli import main
 from vlr.errors import UserError
 from vlr.filter import FilterConfig
@@ -425,6 +426,7 @@ def test_the_sim_is_built_with_the_true_hand_and_the_filter_keeps_the_nominal_on
         w.close()
 
 
+@needs_hardware
 def test_the_filter_models_the_object_the_hardware_config_names():
     """The config (apple) decides what is in the hand, not world.object's value."""
     config = models.ROOT.parent / "hardware" / "example_sim_config.yaml"

@@ -10,6 +10,7 @@ import sys
 
 import pytest
 
+from tests.extras import needs_cluster
 from vlr.cli import main
 
 # Columns that measure time, not results: they differ from run to run.
@@ -79,6 +80,7 @@ def test_address_needs_the_ray_executor(sweep_file, tmp_path):
                  "--address", "ray://head:10001", "--quiet"]) == 2
 
 
+@needs_cluster
 @pytest.mark.parametrize("address", ["127.0.0.1:{port}", "ray://127.0.0.1:{port}", "head"])
 def test_an_unreachable_ray_address_is_named_at_once(sweep_file, tmp_path, capsys, address):
     import socket

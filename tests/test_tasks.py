@@ -16,6 +16,7 @@ import pytest
 
 import tasks
 from tasks.letters import STROKES, letter_waypoints
+from tests.extras import needs_hardware
 
 QUICK = {"particles": 1000, "identify_iterations": 1}
 # The hardware backend's example: emulated motors driving the simulated hand.
@@ -239,6 +240,7 @@ def test_a_command_band_may_give_each_tendon_its_own_limits():
     assert release.shape == (3,) and pull == 1e-3
 
 
+@needs_hardware
 def test_maze_on_hardware_names_the_object_it_needs(tmp_path, capsys):
     """The hardware config grasps the apple: the maze says so before identifying."""
     from vlr.cli import main
@@ -270,6 +272,7 @@ def test_marble_maze_short_episode_rolls_the_marble_along_the_first_run():
         env.close()
 
 
+@needs_hardware
 def test_handwriting_runs_on_the_hardware_backend_without_ground_truth():
     """The hardware path (SDK, Protocol 2.0 packets, emulated motors driving the MuJoCo
     hand; hardware/example_sim_config.yaml): no truth in info, errors from the camera."""
