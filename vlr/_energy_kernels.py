@@ -39,45 +39,48 @@ N_PRM = 13
 RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, RL_FORCE, RL_RHO, N_RL = 0, 3, 6, 7, 16, 17, 18
 
 
-@njit(cache=True)
-def _finger_chain(th, seg, nrm, pcx, pcy, prad, sphi, cphi, qy, qz):
-    """Planar chain of one finger in F (Eq. 2): fills sin/cos of cumulative angles and joint
-    positions (y, z); returns the contact point (x, y, z) in F."""
-    k_n = th.shape[0]
+@njit(cache=True, inline='always', _nrt=False)
+def _finger_chain(th, seg, nrm, i, with_nrm, pcx, pcy, prad, sphi, cphi, qy, qz):
+    """Planar chain of finger i in F (Eq. 2): fills sin/cos of cumulative angles and joint
+    positions (y, z); returns the contact point (x, y, z) in F (`with_nrm` 0: the pad's
+    centre). Indexes th, seg, nrm (N, ...) rather than taking a finger's rows: a row is a
+    view, and each view costs two atomic reference counts in the Newton loop."""
+    k_n = th.shape[1]
     phi = 0.0
     qy[0] = 0.0
     qz[0] = 0.0
     for k in range(k_n):
-        phi += th[k]
+        phi += th[i, k]
         sphi[k] = math.sin(phi)
         cphi[k] = math.cos(phi)
         if k < k_n - 1:
-            qy[k + 1] = qy[k] + seg[k] * sphi[k]
-            qz[k + 1] = qz[k] + seg[k] * cphi[k]
-    cdx = pcx + prad * nrm[0]
-    cdy = pcy + prad * nrm[1]
-    cdz = seg[k_n - 1] + prad * nrm[2]
+            qy[k + 1] = qy[k] + seg[i, k] * sphi[k]
+            qz[k + 1] = qz[k] + seg[i, k] * cphi[k]
+    cdx = pcx + prad * with_nrm * nrm[i, 0]
+    cdy = pcy + prad * with_nrm * nrm[i, 1]
+    cdz = seg[i, k_n - 1] + prad * with_nrm * nrm[i, 2]
     s, c = sphi[k_n - 1], cphi[k_n - 1]
     return (cdx, qy[k_n - 1] + cdy * c + cdz * s, qz[k_n - 1] - cdy * s + cdz * c)
 
 
-@njit(cache=True)
-def _separation(bp, rb, fx, fy, fz, p, R, ox, oy, oz):
-    """Palm-frame vector from a point fixed in O, (ox, oy, oz), to a point fixed in the
-    finger's base frame, (fx, fy, fz): bp + rb f - (p + R o)."""
-    return (bp[0] + rb[0, 0] * fx + rb[0, 1] * fy + rb[0, 2] * fz
+@njit(cache=True, inline='always', _nrt=False)
+def _separation(bp, rb, i, fx, fy, fz, p, R, ox, oy, oz):
+    """Palm-frame vector from a point fixed in O, (ox, oy, oz), to a point fixed in finger
+    i's base frame, (fx, fy, fz): bp[i] + rb[i] f - (p + R o)."""
+    return (bp[i, 0] + rb[i, 0, 0] * fx + rb[i, 0, 1] * fy + rb[i, 0, 2] * fz
             - p[0] - (R[0, 0] * ox + R[0, 1] * oy + R[0, 2] * oz),
-            bp[1] + rb[1, 0] * fx + rb[1, 1] * fy + rb[1, 2] * fz
+            bp[i, 1] + rb[i, 1, 0] * fx + rb[i, 1, 1] * fy + rb[i, 1, 2] * fz
             - p[1] - (R[1, 0] * ox + R[1, 1] * oy + R[1, 2] * oz),
-            bp[2] + rb[2, 0] * fx + rb[2, 1] * fy + rb[2, 2] * fz
+            bp[i, 2] + rb[i, 2, 0] * fx + rb[i, 2, 1] * fy + rb[i, 2, 2] * fz
             - p[2] - (R[2, 0] * ox + R[2, 1] * oy + R[2, 2] * oz))
 
 
-@njit(cache=True)
+@njit(cache=True, inline='always', _nrt=False)
 def _pair(i, k_n, px, py, pz, ax, ay, az, gam, Gam, iso, rb, R, qy, qz, jac, M, lam, gt,
           gA, A, B, gC, C):
     """Gradient and Hessian of phi(v), v = x(theta) - (p + R a): x a point fixed in finger i's
-    distal frame ((px, py, pz) in its finger frame F), a a point fixed in O (ax, ay, az).
+    distal frame ((px, py, pz) in its finger frame F), a a point fixed in O (ax, ay, az);
+    rb the base rotations (N, 3, 3).
     gam = dphi/dv (3,), Gam = d2phi/dv2 (3, 3), both in the palm frame; the caller adds phi.
     grad = J^T gam; Hess = J^T Gam J + sum_a gam_a d2v_a (the geometric part).
     iso > 0 says Gam = iso I (the pinned contact, the default hot path): Gam is not read and
@@ -86,7 +89,7 @@ def _pair(i, k_n, px, py, pz, ax, ay, az, gam, Gam, iso, rb, R, qy, qz, jac, M, 
         dy = py - qy[j]
         dz = pz - qz[j]
         for a in range(3):
-            jac[j, a] = rb[a, 1] * dz - rb[a, 2] * dy
+            jac[j, a] = rb[i, a, 1] * dz - rb[i, a, 2] * dy
     # M = R [a]x : d v / d w
     for a in range(3):
         M[a, 0] = R[a, 1] * az - R[a, 2] * ay
@@ -105,9 +108,9 @@ def _pair(i, k_n, px, py, pz, ax, ay, az, gam, Gam, iso, rb, R, qy, qz, jac, M, 
             dy2 = py - qy[m]
             dz2 = pz - qz[m]
             # gam . R_b (0, -dy', -dz'): the geometric (force x curvature) part
-            geo = -(gam[0] * (rb[0, 1] * dy2 + rb[0, 2] * dz2)
-                    + gam[1] * (rb[1, 1] * dy2 + rb[1, 2] * dz2)
-                    + gam[2] * (rb[2, 1] * dy2 + rb[2, 2] * dz2))
+            geo = -(gam[0] * (rb[i, 0, 1] * dy2 + rb[i, 0, 2] * dz2)
+                    + gam[1] * (rb[i, 1, 1] * dy2 + rb[i, 1, 2] * dz2)
+                    + gam[2] * (rb[i, 2, 1] * dy2 + rb[i, 2, 2] * dz2))
             h = jac[m, 0] * gt[0] + jac[m, 1] * gt[1] + jac[m, 2] * gt[2] + geo
             A[i, j, m] += h
             if m != j:
@@ -149,7 +152,7 @@ def _pair(i, k_n, px, py, pz, ax, ay, az, gam, Gam, iso, rb, R, qy, qz, jac, M, 
             C[3 + b, 3 + c] += mgm - geo
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _spin_rate(i, k_n, th, rl, R, rb, vk):
     """Spin s of the object relative to finger i's distal link about the contact normal N,
     since the start of the solve: s = N . (omega_O - omega_D), omega_O = vee(sym(R R0^T)),
@@ -168,7 +171,7 @@ def _spin_rate(i, k_n, th, rl, R, rb, vk):
     phi = 0.0
     for k in range(k_n):
         phi += th[i, k]
-    cx = nx * rb[0, 0] + ny * rb[1, 0] + nz * rb[2, 0]
+    cx = nx * rb[i, 0, 0] + ny * rb[i, 1, 0] + nz * rb[i, 2, 0]
     s = nx * om0 + ny * om1 + nz * om2 + (phi - rl[i, RL_PHI]) * cx
     # d omega / d w_b = vee(sym(R [e_b]x R0^T)); its projection on N
     jw0 = jw1 = jw2 = 0.0
@@ -197,7 +200,7 @@ def _spin_rate(i, k_n, th, rl, R, rb, vk):
     return s, cx, jw0, jw1, jw2
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _spin_apply(i, k_n, f1, f2, cx, jw0, jw1, jw2, gA, A, B, gC, C):
     """Accumulate an energy f(s) of the spin: gradient f'(s) J, Gauss-Newton Hessian
     f''(s) J J^T (J from `_spin_rate`)."""
@@ -214,7 +217,7 @@ def _spin_apply(i, k_n, f1, f2, cx, jw0, jw1, jw2, gA, A, B, gC, C):
             C[3 + b, 3 + c] += f2 * jw[b] * jw[c]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
               base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
               omass, ocom, grav, flags, prm,
@@ -232,10 +235,11 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
     B[:] = 0.0
     C[:] = 0.0
     e = 0.0
+    rb = base_rot
+    gam, G, lam, gt = vk[1], vk[3:6], vk[2], vk[0]  # scratch rows, taken once
     for i in range(n_f):
-        cfx, cfy, cfz = _finger_chain(th[i], seg[i], nrm[i], pad_xy[i, 0], pad_xy[i, 1],
+        cfx, cfy, cfz = _finger_chain(th, seg, nrm, i, 1.0, pad_xy[i, 0], pad_xy[i, 1],
                                       pad_r[i], sphi, cphi, qy, qz)
-        rb = base_rot[i]
         # Eq. 6: springs about the rest angles.
         if flags[SPRINGS] != 0:
             for k in range(k_n):
@@ -269,9 +273,9 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                         A[i, k, m] += kt[i] * radii[i, k] * radii[i, m]
         # Gravity potential of the finger links: -m g . x_com.
         if flags[LINK_GRAVITY] != 0:
-            gfx = rb[0, 0] * grav[0] + rb[1, 0] * grav[1] + rb[2, 0] * grav[2]
-            gfy = rb[0, 1] * grav[0] + rb[1, 1] * grav[1] + rb[2, 1] * grav[2]
-            gfz = rb[0, 2] * grav[0] + rb[1, 2] * grav[1] + rb[2, 2] * grav[2]
+            gfx = rb[i, 0, 0] * grav[0] + rb[i, 1, 0] * grav[1] + rb[i, 2, 0] * grav[2]
+            gfy = rb[i, 0, 1] * grav[0] + rb[i, 1, 1] * grav[1] + rb[i, 2, 1] * grav[2]
+            gfz = rb[i, 0, 2] * grav[0] + rb[i, 1, 2] * grav[1] + rb[i, 2, 2] * grav[2]
             gb = grav[0] * base_pos[i, 0] + grav[1] * base_pos[i, 1] + grav[2] * base_pos[i, 2]
             for k in range(k_n):
                 m_k = lmass[i, k]
@@ -296,16 +300,14 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
         # rl[i, :3] in O, radius rl[i, RL_RHO]; one equation) and the previous contact points
         # do not slip tangentially to the normal rl[i, 3:] (two), as stiff penalties.
         if flags[CONTACTS] != 0 and flags[ROLLING] != 0:
-            gam = vk[1]
             ax, ay, az = anc[i, 0], anc[i, 1], anc[i, 2]
             nx, ny, nz = rl[i, 3], rl[i, 4], rl[i, 5]
-            v0, v1, v2 = _separation(base_pos[i], rb, cfx, cfy, cfz, p, R, ax, ay, az)
+            v0, v1, v2 = _separation(base_pos, rb, i, cfx, cfy, cfz, p, R, ax, ay, az)
             vn = v0 * nx + v1 * ny + v2 * nz
             t0, t1, t2 = v0 - vn * nx, v1 - vn * ny, v2 - vn * nz
             tn2 = t0 * t0 + t1 * t1 + t2 * t2
             nv = (nx, ny, nz)
             tv = (t0, t1, t2)
-            G = vk[3:6]
             # Friction (docs/METHOD.md 8.2; `MotionConfig.slide_friction`, `spin_friction`). The
             # normal force N is the contact's at the start of the solve, updated while the
             # grasp wedges (`_update_normal_forces`). The slide is a Huber function of the
@@ -353,14 +355,14 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                 f1 += ks * s_sp
                 f2 += ks
             _pair(i, k_n, cfx, cfy, cfz, ax, ay, az, gam, G, 0.0, rb, R, qy, qz, jac, M,
-                  vk[2], vk[0], gA, A, B, gC, C)
+                  lam, gt, gA, A, B, gC, C)
             # Pad centre (fixed in D) to the local centre of curvature (fixed in O).
             s_last, c_last = sphi[k_n - 1], cphi[k_n - 1]
             pcz = seg[i, k_n - 1]
             px = pad_xy[i, 0]
             py = qy[k_n - 1] + pad_xy[i, 1] * c_last + pcz * s_last
             pz = qz[k_n - 1] - pad_xy[i, 1] * s_last + pcz * c_last
-            d0, d1, d2 = _separation(base_pos[i], rb, px, py, pz, p, R,
+            d0, d1, d2 = _separation(base_pos, rb, i, px, py, pz, p, R,
                                      rl[i, 0], rl[i, 1], rl[i, 2])
             dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
             reach = rl[i, RL_RHO] + pad_r[i]
@@ -374,22 +376,21 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                     G[a, b] = kc * (sc * (1.0 if a == b else 0.0)
                                     + (reach / dist) * dv[a] * dv[b])
             _pair(i, k_n, px, py, pz, rl[i, 0], rl[i, 1], rl[i, 2], gam, G, 0.0, rb, R, qy,
-                  qz, jac, M, vk[2], vk[0], gA, A, B, gC, C)
+                  qz, jac, M, lam, gt, gA, A, B, gC, C)
             if spin_on:
                 _spin_apply(i, k_n, f1, f2, cxs, j0, j1, j2, gA, A, B, gC, C)
         # Eq. 8 as a stiff penalty: the contact (fixed in D) stays at its anchor (fixed in O).
         elif flags[CONTACTS] != 0:
             ax, ay, az = anc[i, 0], anc[i, 1], anc[i, 2]
-            gam = vk[1]
             rr = 0.0
             for a in range(3):
-                r_a = (base_pos[i, a] + rb[a, 0] * cfx + rb[a, 1] * cfy + rb[a, 2] * cfz
+                r_a = (base_pos[i, a] + rb[i, a, 0] * cfx + rb[i, a, 1] * cfy + rb[i, a, 2] * cfz
                        - p[a] - (R[a, 0] * ax + R[a, 1] * ay + R[a, 2] * az))
                 rr += r_a * r_a
                 gam[a] = kc * r_a
             e += 0.5 * kc * rr
-            _pair(i, k_n, cfx, cfy, cfz, ax, ay, az, gam, vk[3:6], kc, rb, R, qy, qz, jac, M,
-                  vk[2], vk[0], gA, A, B, gC, C)
+            _pair(i, k_n, cfx, cfy, cfz, ax, ay, az, gam, G, kc, rb, R, qy, qz, jac, M,
+                  lam, gt, gA, A, B, gC, C)
     # Gravity potential of the object: -m g . (p + R com).
     if flags[OBJECT_GRAVITY] != 0:
         cx, cy, cz = ocom[0], ocom[1], ocom[2]
@@ -397,7 +398,7 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
         wy = p[1] + R[1, 0] * cx + R[1, 1] * cy + R[1, 2] * cz
         wz = p[2] + R[2, 0] * cx + R[2, 1] * cy + R[2, 2] * cz
         e -= omass * (grav[0] * wx + grav[1] * wy + grav[2] * wz)
-        gam = vk[2]
+        gam = lam
         for b in range(3):
             gC[b] -= omass * grav[b]
             gam[b] = R[0, b] * grav[0] + R[1, b] * grav[1] + R[2, b] * grav[2]
@@ -416,26 +417,26 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
     return e
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _normal_force(i, th, seg, nrm, rl, p, R, base_pos, base_rot, pad_xy, pad_r, prm,
                   sphi, cphi, qy, qz):
     """Contact i's normal force in the rolling term at the current configuration [N]: k_c
     times how far finger i's pad sphere sinks into the object's local sphere (rl[i, :3]),
     """
     k_n = th.shape[1]
-    _finger_chain(th[i], seg[i], nrm[i], pad_xy[i, 0], pad_xy[i, 1], pad_r[i], sphi, cphi,
+    _finger_chain(th, seg, nrm, i, 1.0, pad_xy[i, 0], pad_xy[i, 1], pad_r[i], sphi, cphi,
                   qy, qz)
     s_last, c_last = sphi[k_n - 1], cphi[k_n - 1]
     pcz = seg[i, k_n - 1]
     py = qy[k_n - 1] + pad_xy[i, 1] * c_last + pcz * s_last
     pz = qz[k_n - 1] - pad_xy[i, 1] * s_last + pcz * c_last
-    d0, d1, d2 = _separation(base_pos[i], base_rot[i], pad_xy[i, 0], py, pz, p, R,
+    d0, d1, d2 = _separation(base_pos, base_rot, i, pad_xy[i, 0], py, pz, p, R,
                              rl[i, 0], rl[i, 1], rl[i, 2])
     g = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - (rl[i, RL_RHO] + pad_r[i])
     return prm[P_KC] * max(0.0, -g)
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _update_normal_forces(th, seg, nrm, rl, p, R, base_pos, base_rot, pad_xy, pad_r, prm,
                           sphi, cphi, qy, qz):
     """Each contact's normal force at the current configuration into rl[:, RL_FORCE], so
@@ -455,7 +456,7 @@ def _update_normal_forces(th, seg, nrm, rl, p, R, base_pos, base_rot, pad_xy, pa
     return changed
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _chol(M, n):
     """In-place lower Cholesky of the leading n x n block; False if not positive definite."""
     for j in range(n):
@@ -474,7 +475,7 @@ def _chol(M, n):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _chol_solve(L, n, b):
     """Solve (L L^T) x = b in place for vector b."""
     for i in range(n):
@@ -489,7 +490,7 @@ def _chol_solve(L, n, b):
         b[i] = t / L[i, i]
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _newton_step(gA, gC, A, B, C, mu, dth, dc, La, X, y, S, col):
     """Damped Newton step (H + mu D) d = -g by Schur complement on the arrow structure.
 
@@ -540,7 +541,7 @@ def _newton_step(gA, gC, A, B, C, mu, dth, dc, La, X, y, S, col):
     return True
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _rotate3(R, w0, w1, w2, out):
     """out = R exp([w]x) (Rodrigues), w = (w0, w1, w2)."""
     ang = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
@@ -565,7 +566,7 @@ def _rotate3(R, w0, w1, w2, out):
         out[a, 2] = r0 * e02 + r1 * e12 + r2 * e22
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                omass, ocom, grav, flags, prm, max_iter,
@@ -577,6 +578,9 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
     object is identified like an unknown spring."""
     n_f, k_n = theta.shape[1], theta.shape[2]
     th = theta[q]
+    # The particle's rows, taken once: each row is a view, and each view costs two atomic
+    # reference counts; taken per evaluation they were a sixth of an evaluation's time.
+    sq, nq, aq, kq, tq = seg[q], nrm[q], anc[q], stiff[q], kt[q]
     om = omass[q]
     oc = ocom[q]
     rl = roll[q] if flags[ROLLING] != 0 else roll[0]
@@ -588,7 +592,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
             th0[i, k] = th[i, k]
     for a in range(3):
         p0[a] = p[a]
-    e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
+    e = _evaluate(th, sq, nq, aq, rl, p, R, kq, tq, u,
                   base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                   om, oc, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk)
     if not math.isfinite(e):
@@ -656,7 +660,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                 p_t[a] = p[a] + t * dc[a]
             w0, w1, w2 = t * dc[3], t * dc[4], t * dc[5]
             _rotate3(R, w0, w1, w2, R_t)
-            e_t = _evaluate(th_t, seg[q], nrm[q], anc[q], rl, p_t, R_t, stiff[q], kt[q], u,
+            e_t = _evaluate(th_t, sq, nq, aq, rl, p_t, R_t, kq, tq, u,
                             base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy,
                             pad_r, om, oc, grav, flags, prm, gA, gC, A, B, C, sphi, cphi,
                             qy, qz, jac, M, vk)
@@ -680,10 +684,10 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                     R[a, b] = R_t[a, b]
             e = e_t
             if (lagged and it <= max_iter // 2 and math.isfinite(prm[P_SLIDE_FRICTION])
-                    and _update_normal_forces(th, seg[q], nrm[q], rl, p, R, base_pos,
+                    and _update_normal_forces(th, sq, nq, rl, p, R, base_pos,
                                               base_rot, pad_xy, pad_r, prm, sphi, cphi, qy,
                                               qz)):
-                e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
+                e = _evaluate(th, sq, nq, aq, rl, p, R, kq, tq, u,
                               base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy,
                               pad_r, om, oc, grav, flags, prm, gA, gC, A, B, C, sphi,
                               cphi, qy, qz, jac, M, vk)
@@ -701,7 +705,7 @@ def _solve_one(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
             mu *= 10.0
             if mu > 1e12:
                 break
-            e = _evaluate(th, seg[q], nrm[q], anc[q], rl, p, R, stiff[q], kt[q], u,
+            e = _evaluate(th, sq, nq, aq, rl, p, R, kq, tq, u,
                           base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                           om, oc, grav, flags, prm, gA, gC, A, B, C, sphi, cphi, qy, qz,
                           jac, M, vk)
@@ -800,7 +804,7 @@ SURF_PLANE, SURF_SPHERE, SURF_CYLINDER = 0, 1, 2
 S_KIND, S_RADIUS, S_KERNEL, S_AXIS, S_FLAT_RADIUS, N_SRF = 0, 1, 2, 3, 6, 7
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _distal_rotation(rb, phi, out):
     """out = R_PD = base_rot @ plane_rotation(phi) (`vlr.kinematics.plane_rotation`)."""
     c, s = math.cos(phi), math.sin(phi)
@@ -810,12 +814,12 @@ def _distal_rotation(rb, phi, out):
         out[a, 2] = rb[a, 1] * s + rb[a, 2] * c
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _pad_points(i, th, seg, nrm, base_pos, rb, pad_xy, pad_r, p, R, sphi, cphi, qy, qz,
-                zero, cen, con):
+                cen, con):
     """Finger i's pad centre `cen` and contact point `con` in the object frame O (3,)."""
     for which in range(2):
-        fx, fy, fz = _finger_chain(th[i], seg[i], zero if which == 0 else nrm[i],
+        fx, fy, fz = _finger_chain(th, seg, nrm, i, 0.0 if which == 0 else 1.0,
                                    pad_xy[i, 0], pad_xy[i, 1], pad_r[i], sphi, cphi, qy, qz)
         out = cen if which == 0 else con
         for b in range(3):
@@ -826,7 +830,7 @@ def _pad_points(i, th, seg, nrm, base_pos, rb, pad_xy, pad_r, p, R, sphi, cphi, 
             out[b] = t
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _surface_normals(th, nrm, base_rot, R, RD, m):
     """m (N, 3): the object's outward normal at each contact, in O: minus the pad's
     (`vlr.surface.surface_normals`)."""
@@ -844,7 +848,7 @@ def _surface_normals(th, nrm, base_rot, R, RD, m):
             m[i, b] = -t
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _rolling_frames(th, anc, R, m, rho_q, srf, has_rho, rl):
     """rl (N, N_RL): the rolling term's frames without friction (`MotionModel.rolling_frames`,
     forces 0): local centres a - rho m, the normals R m, the summed angles, R, rho."""
@@ -865,9 +869,9 @@ def _rolling_frames(th, anc, R, m, rho_q, srf, has_rho, rl):
         rl[i, RL_RHO] = rk
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _roll_contacts(th, seg, nrm, anc, p, R, m, rho_q, srf, has_rho, base_pos, base_rot,
-                   pad_xy, pad_r, sphi, cphi, qy, qz, zero, cen, con, RD):
+                   pad_xy, pad_r, sphi, cphi, qy, qz, cen, con, RD):
     """Each contact moved to where its pad now touches the object's local surface, in place
     (`vlr.surface.roll_contacts` without friction; `m` the normals before the solve)."""
     n_f, k_n = th.shape
@@ -875,7 +879,7 @@ def _roll_contacts(th, seg, nrm, anc, p, R, m, rho_q, srf, has_rho, base_pos, ba
     for i in range(n_f):
         rb = base_rot[i]
         _pad_points(i, th, seg, nrm, base_pos, rb, pad_xy, pad_r, p, R, sphi, cphi, qy, qz,
-                    zero, cen, con)
+                    cen, con)
         mx, my, mz = m[i, 0], m[i, 1], m[i, 2]
         d0, d1, d2 = con[0] - anc[i, 0], con[1] - anc[i, 1], con[2] - anc[i, 2]
         dn = d0 * mx + d1 * my + d2 * mz
@@ -932,7 +936,7 @@ def _roll_contacts(th, seg, nrm, anc, p, R, m, rho_q, srf, has_rho, base_pos, ba
         nrm[i, 0], nrm[i, 1], nrm[i, 2] = v0 / vl, v1 / vl, v2 / vl
 
 
-@njit(cache=True)
+@njit(cache=True, _nrt=False)
 def _path(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u_from, u_to, steps, rolling,
           predict, rho, has_rho, srf, base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy,
           pad_r, omass, ocom, grav, flags, prm, max_iter, sc):
@@ -940,7 +944,7 @@ def _path(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u_from, u_to, step
     rolled after each (`rolling`); returns (status of the first failed solve or OK, the
     iterations spent). `sc` holds the scratch buffers (`_scratch`)."""
     (gA, gC, A, B, C, sphi, cphi, qy, qz, jac, M, vk, th_t, p_t, R_t, dth, dc, La, X, y, S,
-     col, th0, p0, tgt, mbuf, RD, zero, cen, con, th_prev, p_prev, R_prev) = sc
+     col, th0, p0, tgt, mbuf, RD, cen, con, th_prev, p_prev, R_prev) = sc
     n_f, k_n = theta.shape[1], theta.shape[2]
     rho_q = rho[q] if has_rho else rho[0]
     th, p, R = theta[q], pos[q], rot[q]
@@ -999,7 +1003,7 @@ def _path(q, theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u_from, u_to, step
         if rolling:
             _roll_contacts(theta[q], seg[q], nrm[q], anc[q], pos[q], rot[q], mbuf, rho_q, srf,
                            has_rho, base_pos, base_rot, pad_xy, pad_r, sphi, cphi, qy, qz,
-                           zero, cen, con, RD)
+                           cen, con, RD)
     return OK, total
 
 
@@ -1012,7 +1016,7 @@ def _scratch(n_f, k_n):
             np.empty((6, 3)), np.empty((n_f, k_n)), np.empty(3), np.empty((3, 3)),
             np.empty((n_f, k_n)), np.empty(6), np.empty((k_n, k_n)), np.empty((n_f, k_n, 6)),
             np.empty((n_f, k_n)), np.empty((6, 6)), np.empty(k_n), np.empty((n_f, k_n)),
-            np.empty(3), np.empty(n_f), np.empty((n_f, 3)), np.empty((3, 3)), np.zeros(3),
+            np.empty(3), np.empty(n_f), np.empty((n_f, 3)), np.empty((3, 3)),
             np.empty(3), np.empty(3), np.empty((n_f, k_n)), np.empty(3), np.empty((3, 3)))
 
 
