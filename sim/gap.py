@@ -304,7 +304,7 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
     cfg = replace(settings.motion, terms=terms, rolling=rolling)
     if friction:
         # The pads' stick and slip wedge the grasp while the normal forces update (the first
-        # half of the iterations): at the filter's 1e-5 rad the solve stops before it has,
+        # half of the iterations): at 1e-5 rad the solve stops before it has,
         # and the rung's per-action ratios grow by 0.04 on the apple; 1e-6 rad settles it.
         cfg = replace(cfg, tol_theta=min(cfg.tol_theta, 1e-6), tol_pos=min(cfg.tol_pos, 1e-7))
     motion = MotionModel(model, obj, cfg, settings.friction if friction else None)

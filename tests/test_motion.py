@@ -181,7 +181,9 @@ def test_three_joint_two_finger_pinch():
                                   [math.pi / 2, -math.pi / 2], 2e4)
     mm, st, u0 = grasp(model, n=2, theta=(0.1, 0.4, 0.4), config=PIN)
     _, g, _ = mm.evaluate(st, 0, u0)
-    assert np.abs(g).max() < 1e-6
+    # At equilibrium: residual forces and torques under 0.1 mN (m), where the solve's step
+    # tolerance leaves 0.03 mN.
+    assert np.abs(g).max() < 1e-4
     status, _ = mm.solve(st, u0 + np.array([2e-4, -2e-4]))
     assert np.all(status == 0)
     assert np.all(np.isfinite(st.theta))
@@ -262,9 +264,10 @@ def test_friction_keeps_every_contact_inside_its_cone(modelo):
     (the return mapping); without friction, the same action leaves a contact far outside
     (the glued contact pulls sideways with a force the pad cannot hold). A weightless grasp:
     this test hand's grasps under gravity hang on their glued contacts, which friction
-    rightly refuses."""
+    rightly refuses. At `vlr gap`'s tolerances for friction (sim/gap.py): the stick and slip
+    wedge while the normal forces update, which the filter's tolerances cut short."""
     obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
-    weightless = replace(ROLL, gravity=(0.0, 0.0, 0.0))
+    weightless = replace(ROLL, gravity=(0.0, 0.0, 0.0), tol_theta=1e-6, tol_pos=1e-7)
     _, st, u0 = grasp(modelo, config=weightless, theta=(0.3, 0.3))
     du = np.array([6e-4, -4e-4, 0.0])
     loads = {}
