@@ -503,6 +503,28 @@ def _newton_step(gA, gC, A, B, C, mu, dth, dc, La, X, y, S, col):
         S[a, a] += mu * (abs(C[a, a]) + 1e-9)
         dc[a] = -gC[a]
     for i in range(n_f):
+        if k_n == 2:
+            # Two joints a finger (the Model O's): the block's inverse in closed form.
+            a00 = A[i, 0, 0] + mu * (abs(A[i, 0, 0]) + 1e-9)
+            a11 = A[i, 1, 1] + mu * (abs(A[i, 1, 1]) + 1e-9)
+            a01 = A[i, 0, 1]
+            det = a00 * a11 - a01 * a01
+            if not (a00 > 0.0 and det > 0.0):
+                return False
+            i00, i01, i11 = a11 / det, -a01 / det, a00 / det
+            y0 = -(i00 * gA[i, 0] + i01 * gA[i, 1])
+            y1 = -(i01 * gA[i, 0] + i11 * gA[i, 1])
+            y[i, 0], y[i, 1] = y0, y1
+            for c in range(6):
+                b0, b1 = B[i, 0, c], B[i, 1, c]
+                X[i, 0, c] = i00 * b0 + i01 * b1
+                X[i, 1, c] = i01 * b0 + i11 * b1
+            for a in range(6):
+                b0, b1 = B[i, 0, a], B[i, 1, a]
+                dc[a] -= b0 * y0 + b1 * y1
+                for b in range(6):
+                    S[a, b] -= b0 * X[i, 0, b] + b1 * X[i, 1, b]
+            continue
         for a in range(k_n):
             for b in range(k_n):
                 La[a, b] = A[i, a, b]
