@@ -1117,6 +1117,27 @@ def solve_path_batch(theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u_from, u_
 
 
 @njit(parallel=True, cache=True)
+def contact_points_batch(theta, seg, nrm, base_pos, base_rot, pad_xy, pad_r, out):
+    """out (P, N, 3): every particle's contact points in the palm frame (Eq. 2;
+    `vlr.kinematics.contact_points`, whose batched calls land here)."""
+    n_p, n_f, k_n = theta.shape
+    n_chunks = min(n_p, 64)
+    for ch in prange(n_chunks):
+        sphi = np.empty(k_n)
+        cphi = np.empty(k_n)
+        qy = np.empty(k_n)
+        qz = np.empty(k_n)
+        for q in range((ch * n_p) // n_chunks, ((ch + 1) * n_p) // n_chunks):
+            th, sg, nr = theta[q], seg[q], nrm[q]
+            for i in range(n_f):
+                fx, fy, fz = _finger_chain(th, sg, nr, i, 1.0, pad_xy[i, 0], pad_xy[i, 1],
+                                           pad_r[i], sphi, cphi, qy, qz)
+                for a in range(3):
+                    out[q, i, a] = (base_pos[i, a] + base_rot[i, a, 0] * fx
+                                    + base_rot[i, a, 1] * fy + base_rot[i, a, 2] * fz)
+
+
+@njit(parallel=True, cache=True)
 def evaluate_batch(theta, seg, nrm, anc, roll, pos, rot, stiff, kt, u,
                    base_pos, base_rot, radii, rest, lo, hi, lmass, lcom, pad_xy, pad_r,
                    omass, ocom, grav, flags, prm, energy):

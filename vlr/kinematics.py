@@ -23,6 +23,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from vlr import _energy_kernels as _kern
 from vlr.spec import FingerSpec, HandSpec
 
 __all__ = [
@@ -288,6 +289,17 @@ def contact_points(model: HandModel, theta: np.ndarray, normals: np.ndarray,
     """
     theta = np.asarray(theta, dtype=float)
     seg = _segments(model, theta, segments)
+    normals = np.asarray(normals, dtype=float)
+    if theta.ndim == 3 and normals.shape == theta.shape[:2] + (3,):
+        # Particles (P, N, K): one pass of a kernel, not a dozen NumPy temporaries.
+        out = np.empty(normals.shape)
+        _kern.contact_points_batch(np.ascontiguousarray(theta), np.ascontiguousarray(seg),
+                                   np.ascontiguousarray(normals),
+                                   np.ascontiguousarray(model.base_pos, dtype=float),
+                                   np.ascontiguousarray(model.base_rot, dtype=float),
+                                   np.ascontiguousarray(model.pad_center[:, :2]),
+                                   np.ascontiguousarray(model.pad_radius, dtype=float), out)
+        return out
     q = joint_positions(model, theta, seg)[..., -1, :]
     c_d = contact_in_distal(model, normals, seg)
     phi = np.sum(theta, axis=-1)

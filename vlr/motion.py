@@ -384,13 +384,12 @@ class ParticleState:
         c = self.contacts(model)
         if residuals is not None:
             c = c + residuals
-        self.anchors = np.ascontiguousarray(
-            np.einsum("pji,pnj->pni", self.rot, c - self.pos[:, None, :]))
+        self.anchors = np.ascontiguousarray((c - self.pos[:, None, :]) @ self.rot)
 
     def contact_residuals(self, model: HandModel) -> np.ndarray:
         """(P, N, 3) anchor minus contact point in the palm frame, R a_i + p - p_i [m]: the
         stretch of the contact penalty (Eq. 8 as a stiff spring), k_c times it the force."""
-        anchors_palm = np.einsum("pij,pnj->pni", self.rot, self.anchors) + self.pos[:, None, :]
+        anchors_palm = self.anchors @ np.swapaxes(self.rot, -1, -2) + self.pos[:, None, :]
         return anchors_palm - self.contacts(model)
 
 
