@@ -161,10 +161,11 @@ def test_sim_nh1_unknown_link_lengths():
 def test_sim_ukf_thumb_distal_stiffness():
     # The unscented Kalman filter's row of docs/RESULTS.md (section 2; docs/sweeps/
     # estimators.yaml): the thumb's replaced distal spring on the toy block after 35 actions,
-    # the sim's defaults, seed 0. Measured: the spring (true 0.045 N m/rad) found to 0.0013,
-    # interval 0.038-0.050, proximal 0.80 deg, contacts 1.0 mm, coverage 1.0, 0.8 s of filter
-    # for the trial (the particle filter at 60,000: 0.0006 +- 0.0006 over seeds 0-4, some
-    # 180 s). Over seeds 0-4 the UKF's spring is 0.0015 +- 0.0009, coverage 0.97.
+    # the sim's defaults, seed 0. Measured: the spring (true 0.045 N m/rad) found to 0.0004,
+    # interval 0.039-0.051, proximal 0.69 deg, contacts 0.98 mm, coverage 1.0, 0.7 s of
+    # filter for the trial (the particle filter at 60,000: 0.0006 +- 0.0006 over seeds 0-4,
+    # some 185 s). Over seeds 0-4 the UKF's spring is 0.0016 +- 0.0011 (0.0031 at worst),
+    # coverage 0.97; at the solver's former tolerances seed 0 read 0.0013, 0.80 deg.
     r = _run({"world.backend": "sim", "world.object": "toy_block",
               "world.true_hand": "modelo_thumb45", "filter.estimator": "ukf", "seed": 0,
               "loop.max_iterations": 35, "loop.min_iterations": 35,

@@ -162,6 +162,45 @@ def test_identify_sim_runs_from_rendered_frames(tmp_path):
     assert result["backend"] == "sim" and "errors" in result
 
 
+def test_identify_with_the_ukf_writes_the_same_outputs(tmp_path, capsys):
+    """`--estimator ukf`: the unscented Kalman filter on the same model, the same files,
+    its sigma points as the hypotheses."""
+    out = tmp_path / "ukf"
+    rc = main(["identify", "--backend", "synthetic", "--estimator", "ukf", "--max-iterations",
+               "3", "--seed", "1", "--out", str(out), "--quiet"])
+    assert rc == 0
+    assert "unscented Kalman filter, 25 sigma points" in capsys.readouterr().out
+    result = json.loads((out / "result.json").read_text())
+    assert (result["estimator"], result["hypotheses"], result["particles"]) == ("ukf", 25, None)
+    assert result["settings"]["filter.estimator"] == "ukf"
+    assert {"proximal_deg_mean", "contact_mm_mean"} <= set(result["errors"])
+    assert 0 <= result["coverage"] <= 1 and len(result["ci_deg_by_iteration"]) == 4
+    assert result["timing"]["filter_s"] > 0
+    hist = np.load(out / "history.npz")
+    est = result["estimates"]
+    np.testing.assert_allclose([e["low"] for e in est.values()], hist["low"][-1, :6])
+    # The 95% interval is the Gaussian's: the criterion is its mean width.
+    width = np.degrees(hist["high"][-1, :6] - hist["low"][-1, :6]).mean()
+    np.testing.assert_allclose(result["ci_deg_by_iteration"][-1], width, atol=1e-3)
+    for name in ("convergence.png", "particles.png"):
+        assert (out / name).stat().st_size > 1000
+
+
+def test_what_the_ukf_cannot_do_is_refused_in_one_line(tmp_path, capsys):
+    for extra, named in ((["--unknown", "curvature"], "filter.unknowns 'curvature'"),
+                         (["--set", "loop.exploration=active"], "loop.exploration active")):
+        rc = main(["identify", "--backend", "synthetic", "--estimator", "ukf", *extra,
+                   "--out", str(tmp_path), "--quiet"])
+        err = capsys.readouterr().err
+        assert rc == 2 and named in err and "filter.estimator: pf" in err
+        assert len(err.strip().splitlines()) == 1
+    rc = main(["identify", "--backend", "synthetic", "--set", "filter.estimator=kalman",
+               "--out", str(tmp_path), "--quiet"])
+    assert rc == 2 and "filter.estimator: 'kalman' is not one of pf, ukf" in (
+        capsys.readouterr().err)
+    assert not (tmp_path / "result.json").exists()
+
+
 def test_identify_bad_input_is_one_clear_line(tmp_path, capsys):
     rc = main(["identify", "--backend", "synthetic", "--unknown", "stiffness:pinky.distal",
                "--out", str(tmp_path), "--quiet"])

@@ -50,8 +50,8 @@ def synthetic_trace():
 
 
 def _follow(pf, x, truth, commands) -> ParticleState:
-    """One particle from `x` through the trace's path (the filter's own steps)."""
-    from vlr.information import init_motion_config
+    """One particle from `x` through the trace's path (the filter's own steps, `precise`)."""
+    from vlr.information import init_motion_config, precise
 
     st = ParticleState.nominal(pf.model, 1, truth.theta, truth.normals, truth.position,
                                truth.rotation)
@@ -59,7 +59,7 @@ def _follow(pf, x, truth, commands) -> ParticleState:
     st.anchor_to_pose(pf.model)
     pf.motion.solve(st, commands[0], init_motion_config(pf))
     for a, b in zip(commands, commands[1:], strict=False):
-        pf.motion.solve(st, b, u_from=a)
+        pf.motion.solve(st, b, precise(pf.config.motion), u_from=a)
     assert st.valid.all()
     return st
 

@@ -2,6 +2,7 @@
 repeating finished trials, and rebuilds the same tables from those files. The tiny sweep
 (`sweep_file`) is tests/conftest.py's."""
 
+import csv
 import json
 from pathlib import Path
 
@@ -383,3 +384,32 @@ def test_a_trials_id_hashes_every_setting_in_effect():
     b = Trial("s", load_settings(synthetic, {"world.options.true_stiffness":
                                              {"thumb.distal": 0.05}}))
     assert a.id != b.id
+
+
+def test_the_estimator_is_a_sweep_key_and_a_column(tmp_path):
+    """`filter.estimator` sweeps like any setting; the table and the summary split by it, the
+    UKF's rows without particles, every row with the filter's seconds per trial."""
+    path = tmp_path / "est.yaml"
+    path.write_text(f"""\
+name: estimators
+out: {tmp_path / 'out'}
+seeds: 0
+settings: {{world.backend: synthetic, filter.particles: 200, loop.max_iterations: 2}}
+grid: {{filter.estimator: [pf, ukf]}}
+""")
+    assert main(["sweep", str(path), "--quiet"]) == 0
+    with open(tmp_path / "out" / "table.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    by = {r["estimator"]: r for r in rows}
+    assert set(by) == {"pf", "ukf"} and all(r["status"] == "ok" for r in rows)
+    assert (by["pf"]["particles"], by["ukf"]["particles"]) == ("200", "")
+    assert all(float(r["s_per_trial"]) > 0 for r in rows)
+    summary = (tmp_path / "out" / "summary.md").read_text()
+    assert "| estimator |" in summary and "filter s/trial" in summary
+    assert "| ukf |" in summary and "| pf |" in summary
+    # Bad combinations are refused before any trial runs.
+    path.write_text(path.read_text().replace("grid:", "settings2:").replace(
+        "settings2: {filter.estimator: [pf, ukf]}",
+        "cases: [{name: c, filter.estimator: ukf, filter.unknowns: [curvature]}]"))
+    with pytest.raises(UserError, match="case 'c': filter.unknowns 'curvature'"):
+        expand(load_sweep(path))

@@ -123,6 +123,24 @@ def test_identify_view_flags_serve_then_save_and_stop(tmp_path, monkeypatch, cap
     assert (tmp_path / "run" / "particles.png").stat().st_size > 1000
 
 
+@needs_meshcat
+def test_the_view_draws_the_ukfs_sigma_points(tmp_path, monkeypatch):
+    drawn = []
+    draw = FilterView.draw
+
+    def spy(self, state, *a, **k):
+        drawn.append((state.n, int(np.asarray(state.valid).sum())))
+        return draw(self, state, *a, **k)
+
+    monkeypatch.setattr(view_mod.FilterView, "draw", spy)
+    page = tmp_path / "scene.html"
+    rc = main(["identify", "--backend", "synthetic", "--estimator", "ukf", "--max-iterations",
+               "1", "--out", str(tmp_path / "run"), "--quiet", "--view-html", str(page)])
+    assert rc == 0 and "MeshCat.Viewer" in page.read_text()
+    # One scene per update, of the 2D + 1 = 25 sigma points (those that settled).
+    assert len(drawn) == 2 and all(n == 25 and valid > 12 for n, valid in drawn)
+
+
 # --------------------------------------------------------------------------- in a browser
 
 def _colour_pixels(png, rgb) -> int:

@@ -1,4 +1,5 @@
-"""The particle filter of the self-identification (Algorithm 1; docs/METHOD.md 3, 8.2).
+"""The particle filter of the self-identification (Algorithm 1; docs/METHOD.md 3, 8.2), and
+what it shares with the unscented Kalman filter of `vlr.ukf` (`GraspFilter`).
 
 One iteration: move every particle by the motion model with the common command u_t
 (Eq. 4, 9); predict its POM pose (Eq. 5); weight by the likelihood of the observed pose,
@@ -9,7 +10,9 @@ contact frame.
 
 Sampled dimensions ("dims"), in this order: joint angles theta (N*K) [rad]; the contact on
 each pad as two angles (alpha, beta) per finger [rad] (`vlr.kinematics.normals_from_angles`);
-then the unknown parameters asked for (`vlr.unknowns`).
+then the unknown parameters asked for (`vlr.unknowns`). Both estimators carry these
+dimensions, move their hypotheses (particles, or sigma points) by the same motion model and
+weigh them by the same observation model (`GraspFilter`); `filter.estimator` chooses one.
 """
 
 from __future__ import annotations
@@ -37,9 +40,11 @@ from vlr.unknowns import (
 
 __all__ = [
     "ObjectBelief",
+    "UnscentedConfig",
     "FilterConfig",
     "Summary",
     "IterationRecord",
+    "GraspFilter",
     "ParticleFilter",
     "systematic_resample",
     "effective_sample_size",
@@ -167,10 +172,48 @@ class ObjectBelief:
 
 
 @dataclass(frozen=True)
-class FilterConfig:
-    """Particle filter settings (units in the names or in brackets).
+class UnscentedConfig:
+    """Settings of the unscented Kalman filter (`vlr.ukf`; `filter.estimator: ukf`).
 
     Attributes:
+        alpha: the spread of the scaled sigma points (van der Merwe's alpha, in (0, 1]): they
+            lie alpha sqrt(D + kappa) standard deviations from the mean, D the sampled
+            dimensions (12 for the Model O without unknowns: 0.5 puts them 1.7 sd out).
+        beta: the prior's kurtosis term (2: Gaussian).
+        kappa: the secondary scaling (D + kappa > 0).
+        process_theta_deg: process noise of each joint angle per action [deg] (the motion
+            model's error the particle filter leaves to the likelihood; 0: none).
+        process_contact_deg: the same for each pad contact angle [deg].
+    """
+
+    alpha: float = 0.5
+    beta: float = 2.0
+    kappa: float = 0.0
+    process_theta_deg: float = 0.0
+    process_contact_deg: float = 0.0
+
+    def __post_init__(self) -> None:
+        if not 0 < self.alpha <= 1:
+            raise ValueError(f"alpha {self.alpha} must be in (0, 1]")
+        if not (math.isfinite(self.beta) and self.beta >= 0):
+            raise ValueError(f"beta {self.beta} must be >= 0")
+        if not math.isfinite(self.kappa):
+            raise ValueError(f"kappa {self.kappa} must be finite")
+        for name in ("process_theta_deg", "process_contact_deg"):
+            v = getattr(self, name)
+            if not (math.isfinite(v) and v >= 0):
+                raise ValueError(f"{name} {v} must be >= 0 (0: none)")
+
+
+@dataclass(frozen=True)
+class FilterConfig:
+    """Filter settings (units in the names or in brackets).
+
+    Attributes:
+        estimator: "pf", the particle filter (Algorithm 1, the paper's); "ukf", the unscented
+            Kalman filter over the same dimensions, motion and observation models (`vlr.ukf`),
+            which ignores `particles`, `ess_fraction` and `jitter_h`.
+        ukf: the unscented Kalman filter's settings (`UnscentedConfig`).
         particles: P (the paper: 60,000).
         unknowns: unknown-parameter specs (`vlr.unknowns`).
         priors: {spec: (low, high)} the uniform prior of an unknown in its SI unit; an
@@ -198,6 +241,8 @@ class FilterConfig:
         observation: the likelihood (`vlr.observation.ObservationConfig`).
     """
 
+    estimator: Literal["pf", "ukf"] = "pf"
+    ukf: UnscentedConfig = field(default_factory=UnscentedConfig)
     particles: int = 60_000
     unknowns: tuple[str, ...] = ()
     priors: dict[str, tuple[float, float]] = field(default_factory=dict)
@@ -214,6 +259,8 @@ class FilterConfig:
     observation: ObservationConfig = field(default_factory=ObservationConfig)
 
     def __post_init__(self) -> None:
+        if self.estimator not in ("pf", "ukf"):
+            raise ValueError(f"estimator {self.estimator!r}: use pf or ukf")
         if self.particles < 10:
             raise ValueError(f"particles {self.particles} must be >= 10")
         if not (math.isfinite(self.theta_spread_deg) and self.theta_spread_deg > 0):
@@ -284,7 +331,9 @@ class IterationRecord:
     """What one filter iteration did, for history and plots.
 
     prior: summary after the motion step (before weighting); posterior: after resampling,
-    before jitter (None for a prediction-only step). ci_deg: the convergence measure.
+    before jitter (None for a prediction-only step). ci_deg: the convergence measure. The
+    unscented Kalman filter (`vlr.ukf`) gives its Gaussian's summaries, ess NaN, beta 1 and
+    its sigma points that failed to solve as n_invalid.
     """
 
     iteration: int
@@ -312,8 +361,13 @@ def _liu_west(x: np.ndarray, a: float, h: float, rng: np.random.Generator) -> np
 
 # --------------------------------------------------------------------------- the filter
 
-class ParticleFilter:
-    """Algorithm 1 over `ParticleState`s, with the motion model of `vlr.motion`.
+class GraspFilter:
+    """What the two estimators share: hypotheses of the grasp as `ParticleState`s over the
+    sampled dimensions (module docstring), moved by the motion model Gamma (Eq. 4, 9) and
+    weighed by the observation model Lambda (Eq. 5), and the settle that brings a new
+    hypothesis to equilibrium at the current command (`_project`). `ParticleFilter` and
+    `vlr.ukf.UnscentedFilter` derive from it: `initialize`, `step` and `summarize` are
+    theirs.
 
     Args:
         model: the hand the user believes in.
@@ -340,7 +394,7 @@ class ParticleFilter:
                                     jump_pos=0.05)
         self.project_status = np.zeros(5, dtype=np.int64)
         self.newton_iterations: dict[str, float] = {}
-        self.recoveries = 0  # times every particle failed and the prior was resampled
+        self.recoveries = 0  # times every hypothesis failed and the prior was drawn again
         self.prior_redraws = 0  # prior draws of which no particle settled (`initialize`)
         self._init_cfg = replace(self.config.motion, jump_theta=self.config.init_jump_theta,
                                  jump_pos=0.05, max_iter=max(self.config.motion.max_iter, 100))
@@ -378,6 +432,91 @@ class ParticleFilter:
 
     def _hold_object(self, state: ParticleState) -> None:
         hold_unknowns(state, self.unknowns, self.motion.obj)
+
+    def _contact_centre(self, state: ParticleState, nominal_contact: np.ndarray) -> np.ndarray:
+        """The pad contact angles (alpha, beta) the prior is drawn about, (P, N, 2) [rad]:
+        `config.contact_prior`'s "surface" contacts of each hypothesis's own fingers where the
+        local surface fixes them (`vlr.surface.surface_contact_normals`), else the nominal
+        contact (N, 2) for all. After the unknowns: a link's length moves its pad, a
+        curvature its surface."""
+        centre = np.broadcast_to(np.asarray(nominal_contact, dtype=float)[None],
+                                 (state.n,) + np.shape(nominal_contact))
+        if self.config.contact_prior == "surface":
+            normals = surface_contact_normals(self.model, self.motion.obj.surface, state.theta,
+                                              state.segments, state.rot,
+                                              self.motion.contact_rho(state))
+            if normals is not None:
+                centre = np.stack(angles_from_normals(normals), axis=-1)
+        return centre
+
+    def _spring_columns(self, n_columns: int) -> np.ndarray:
+        """The springs' columns among `n_columns` sampled dimensions (the unknowns last)."""
+        mask = np.zeros(n_columns, dtype=bool)
+        base = n_columns - len(self.unknowns)
+        for j, u in enumerate(self.unknowns):
+            mask[base + j] = u.kind in SPRING_KINDS
+        return mask
+
+    def _project(self, state: ParticleState, moved: np.ndarray | None = None) -> None:
+        """Settle new hypotheses (jittered particles, the UKF's sigma points) to equilibrium
+        at the current command, then re-anchor.
+
+        A jittered configuration is off its equilibrium (Eq. 9): left as is, the next motion
+        solve first travels back to it, several degrees and millimetres (measured: 10-25
+        Newton iterations at 0.2-0.4 mm actions), and its predicted POM motion mixes that
+        trek with the action's effect, so most jittered particles lose their weight. Settling
+        at u_t and re-deriving the anchors against the pre-jitter POM pose (docs/METHOD.md
+        8.2) keeps each particle's POM where it was observed, so the next update weighs only
+        the action's effect, and the next solve is short.
+
+        `moved` (P,) bool: only these particles were jittered; the others are still at their
+        equilibrium and are left alone (with the measured ESS, about half the particles)."""
+        if moved is None:
+            moved = np.ones(state.n, dtype=bool)
+        idx = np.flatnonzero(moved)
+        sub = state.take(idx)
+        status, iters = self.motion.solve(sub, self.command, self._project_cfg)
+        self.project_status = np.bincount(status, minlength=5)
+        self.project_status[0] += state.n - len(idx)
+        self.newton_iterations["settle"] = float(np.median(iters)) if len(idx) else 0.0
+        self.profile.update(settle_mean=float(iters.mean()) if len(idx) else 0.0,
+                            settled_share=len(idx) / state.n)
+        residuals = sub.contact_residuals(self.model)
+        sub.pos[...] = state.pos[idx]
+        sub.rot[...] = state.rot[idx]
+        sub.anchor_to_pose(self.model, residuals)
+        state.put(idx, sub)
+
+    def summarize(self, values: np.ndarray) -> Summary:
+        """Mean, median and 95% interval of a quantity of the current hypotheses, (H, ...)
+        values per hypothesis (`self.state`)."""
+        raise NotImplementedError
+
+    def initialize(self, observation: PoseObservation, command: np.ndarray,
+                   nominal_theta: np.ndarray, nominal_contact: np.ndarray) -> IterationRecord:
+        """The prior about the nominal grasp, settled at u_0 and weighed by the first
+        observation."""
+        raise NotImplementedError
+
+    def step(self, command: np.ndarray, observation: PoseObservation | None) -> IterationRecord:
+        """One iteration for the new absolute command u_t (N,) [m]; `observation` None makes
+        it a prediction-only step."""
+        raise NotImplementedError
+
+    @property
+    def converged(self) -> bool:
+        return bool(self.history) and self.history[-1].ci_deg < self.config.ci_threshold_deg
+
+
+class ParticleFilter(GraspFilter):
+    """Algorithm 1 over `ParticleState`s, with the motion model of `vlr.motion`.
+
+    Args:
+        model: the hand the user believes in.
+        obj: the object believed (`vlr.motion.ObjectParams`).
+        config: the filter's settings.
+        seed: seeds the filter's np.random.Generator (all its randomness).
+    """
 
     # ---- Algorithm 1
 
@@ -423,15 +562,7 @@ class ParticleFilter:
         self._hold_object(state)
         for u in self.unknowns:
             set_unknown(state, u, draw_prior(rng, u, p))
-        centre = np.asarray(nominal_contact, dtype=float)[None]
-        if cfg.contact_prior == "surface":
-            # After the unknowns: a link's length moves its pad, a curvature its surface.
-            normals = surface_contact_normals(m, self.motion.obj.surface, state.theta,
-                                              state.segments, state.rot,
-                                              self.motion.contact_rho(state))
-            if normals is not None:
-                centre = np.stack(angles_from_normals(normals), axis=-1)
-        ab = centre + spread
+        ab = self._contact_centre(state, nominal_contact) + spread
         state.normals[...] = normals_from_angles(ab[..., 0], ab[..., 1])
         state.anchor_to_pose(m)
         self.state = state
@@ -557,14 +688,6 @@ class ParticleFilter:
             x_new[:, base + j] = np.clip(np.where(col > hi, 2 * hi - col, col), lo, hi)
         return x_new, moved
 
-    def _spring_columns(self, n_columns: int) -> np.ndarray:
-        """The springs' columns among `n_columns` sampled dimensions (the unknowns last)."""
-        mask = np.zeros(n_columns, dtype=bool)
-        base = n_columns - len(self.unknowns)
-        for j, u in enumerate(self.unknowns):
-            mask[base + j] = u.kind in SPRING_KINDS
-        return mask
-
     def _jitter(self, x: np.ndarray, parents: np.ndarray | None = None) -> np.ndarray | None:
         """Liu-West kernel (`_kernel`) on `self.state` at `self.command`, then re-anchor and
         settle (`_project`). Returns the rows that moved (None: all)."""
@@ -578,42 +701,13 @@ class ParticleFilter:
         self._project(state, moved)
         return moved
 
-    def _project(self, state: ParticleState, moved: np.ndarray | None = None) -> None:
-        """Settle jittered particles to equilibrium at the current command, then re-anchor.
-
-        A jittered configuration is off its equilibrium (Eq. 9): left as is, the next motion
-        solve first travels back to it, several degrees and millimetres (measured: 10-25
-        Newton iterations at 0.2-0.4 mm actions), and its predicted POM motion mixes that
-        trek with the action's effect, so most jittered particles lose their weight. Settling
-        at u_t and re-deriving the anchors against the pre-jitter POM pose (docs/METHOD.md
-        8.2) keeps each particle's POM where it was observed, so the next update weighs only
-        the action's effect, and the next solve is short.
-
-        `moved` (P,) bool: only these particles were jittered; the others are still at their
-        equilibrium and are left alone (with the measured ESS, about half the particles)."""
-        if moved is None:
-            moved = np.ones(state.n, dtype=bool)
-        idx = np.flatnonzero(moved)
-        sub = state.take(idx)
-        status, iters = self.motion.solve(sub, self.command, self._project_cfg)
-        self.project_status = np.bincount(status, minlength=5)
-        self.project_status[0] += state.n - len(idx)
-        self.newton_iterations["settle"] = float(np.median(iters)) if len(idx) else 0.0
-        self.profile.update(settle_mean=float(iters.mean()) if len(idx) else 0.0,
-                            settled_share=len(idx) / state.n)
-        residuals = sub.contact_residuals(self.model)
-        sub.pos[...] = state.pos[idx]
-        sub.rot[...] = state.rot[idx]
-        sub.anchor_to_pose(self.model, residuals)
-        state.put(idx, sub)
-
     # ---- summaries
+
+    def summarize(self, values: np.ndarray) -> Summary:
+        """Mean, median and 95% interval over the particles (equally weighted)."""
+        return Summary.of(np.asarray(values).reshape(len(values), -1))
 
     def ci_deg(self, x: np.ndarray) -> float:
         """Mean 95% interval width over joint angles [deg] (docs/METHOD.md 3)."""
         n_th = self.model.n_fingers * self.model.n_joints
         return interval_width_deg(x[:, :n_th]) if len(x) else float("inf")
-
-    @property
-    def converged(self) -> bool:
-        return bool(self.history) and self.history[-1].ci_deg < self.config.ci_threshold_deg

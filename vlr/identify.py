@@ -24,14 +24,15 @@ import numpy as np
 from vlr.active import ActiveExploration, choose_action
 from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
-from vlr.filter import FilterConfig, IterationRecord, ParticleFilter, Summary
+from vlr.filter import FilterConfig, GraspFilter, IterationRecord, ParticleFilter
 from vlr.hand import GraspError, report_commands
 from vlr.kinematics import HandModel, contact_in_distal, normals_from_angles
 from vlr.motion import ObjectParams
 from vlr.observation import PoseObservation, TensionedObservation
 from vlr.synthetic import NominalGrasp, Truth
 
-__all__ = ["ActingWorld", "LoopConfig", "Estimate", "Score", "IdentifyResult", "identify"]
+__all__ = ["ActingWorld", "LoopConfig", "Estimate", "Score", "IdentifyResult", "identify",
+           "make_filter"]
 
 
 class ActingWorld(Protocol):
@@ -135,6 +136,7 @@ class IdentifyResult:
             (`vlr.hand.ApplyReport.grasp_held`), None if it held; the run stops there,
             before that action's update (the model assumes a fingertip grasp).
         grasp_message: the hand's reason.
+        hypotheses: the filter's particles, or the UKF's sigma points.
     """
 
     converged: bool
@@ -149,9 +151,22 @@ class IdentifyResult:
     seconds: list[float]
     grasp_lost_at: int | None = None
     grasp_message: str = ""
+    hypotheses: int = 0
 
 
-def _score(pf: ParticleFilter, rec: IterationRecord, truth: Truth) -> Score:
+def make_filter(model: HandModel, obj: ObjectParams, config: FilterConfig | None = None,
+                seed: int = 0) -> GraspFilter:
+    """The estimator `config.estimator` names: the particle filter ("pf") or the unscented
+    Kalman filter ("ukf", `vlr.ukf`, imported only then)."""
+    config = config or FilterConfig()
+    if config.estimator == "ukf":
+        from vlr.ukf import UnscentedFilter
+
+        return UnscentedFilter(model, obj, config, seed)
+    return ParticleFilter(model, obj, config, seed)
+
+
+def _score(pf: GraspFilter, rec: IterationRecord, truth: Truth) -> Score:
     post = rec.posterior or rec.prior
     n_th = pf.model.n_fingers * pf.model.n_joints
     t = truth.theta.ravel()
@@ -188,7 +203,7 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
              filter_config: FilterConfig | None = None, loop: LoopConfig | None = None,
              seed: int = 0, truth: Callable[[], Truth] | None = None,
              progress: Callable[[IterationRecord], None] | None = None,
-             watch: Callable[[ParticleFilter, IterationRecord], None] | None = None,
+             watch: Callable[[GraspFilter, IterationRecord], None] | None = None,
              ) -> IdentifyResult:
     """Run Algorithm 1: grasp -> observe -> (act -> observe -> update)* until converged.
 
@@ -199,7 +214,8 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
         obj: object mass and centre of mass.
         nominal: nominal grasp guess (angles, contacts) for the prior; its command is not used
             (the world's grasp() reports u_0).
-        filter_config: the particle filter's settings.
+        filter_config: the filter's settings (`filter.estimator`: the particle filter or
+            the unscented Kalman filter, `make_filter`).
         loop: the loop's settings.
         seed: seeds the filter (`seed`) and the actions (`seed + 1`).
         truth: ground truth callable for SCORING ONLY.
@@ -208,7 +224,11 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
             live 3D view of the particles); it must not change the filter.
     """
     cfg = loop or LoopConfig()
-    pf = ParticleFilter(model, obj, filter_config, seed)
+    if filter_config is not None and filter_config.estimator == "ukf":
+        from vlr.ukf import check_estimator
+
+        check_estimator(filter_config, cfg.exploration)
+    pf = make_filter(model, obj, filter_config, seed)
     action_rng = np.random.default_rng(seed + 1)
     report = world.grasp()
     u = report_commands(report)
@@ -290,7 +310,7 @@ def _with_tensions(obs: PoseObservation, tensions) -> PoseObservation:
                                 np.asarray(tensions, dtype=float))
 
 
-def _result(pf: ParticleFilter, iterations: int, converged_at: int | None,
+def _result(pf: GraspFilter, iterations: int, converged_at: int | None,
             scores: list[Score], seconds: list[float]) -> IdentifyResult:
     m = pf.model
     # The estimate is the last posterior (resampled, before the jitter that prepares the
@@ -299,7 +319,7 @@ def _result(pf: ParticleFilter, iterations: int, converged_at: int | None,
     if last is not None:
         post = last.posterior or last.prior
     else:
-        post = Summary.of(pf.pack(pf.state))
+        post = pf.summarize(pf.pack(pf.state))
     mean = post.mean
     names = pf.dim_names
     est = {n: Estimate(float(mean[j]), float(post.low[j]), float(post.high[j]),
@@ -308,16 +328,15 @@ def _result(pf: ParticleFilter, iterations: int, converged_at: int | None,
     n_th = m.n_fingers * m.n_joints
     theta = {f"{f}.{k}": est[f"theta:{f}.{k}"] for f in m.names for k in range(m.n_joints)}
     ab = mean[n_th:n_th + 2 * m.n_fingers].reshape(m.n_fingers, 2)
-    contacts = contact_in_distal(m, normals_from_angles(ab[:, 0], ab[:, 1]),
-                                 pf.state.segments.mean(axis=0))
+    segments = pf.summarize(pf.state.segments).mean.reshape(m.n_fingers, m.n_joints)
+    contacts = contact_in_distal(m, normals_from_angles(ab[:, 0], ab[:, 1]), segments)
     c_all = contact_in_distal(m, pf.state.normals, pf.state.segments)
-    lengths = np.linalg.norm(c_all[..., 1:], axis=-1)
-    ql = np.quantile(lengths, [0.025, 0.5, 0.975], axis=0)
-    dvl = {f: Estimate(float(lengths[:, i].mean()), float(ql[0, i]), float(ql[2, i]),
-                       float(ql[1, i]))
+    lengths = pf.summarize(np.linalg.norm(c_all[..., 1:], axis=-1))
+    dvl = {f: Estimate(float(lengths.mean[i]), float(lengths.low[i]), float(lengths.high[i]),
+                       float(lengths.median[i]))
            for i, f in enumerate(m.names)}
     unknowns = {u.spec: est[u.spec] for u in pf.unknowns}
     return IdentifyResult(converged=pf.converged, iterations=iterations,
                           converged_at=converged_at, theta=theta, contacts=contacts,
                           distal_virtual_length=dvl, unknowns=unknowns, history=pf.history,
-                          scores=scores, seconds=seconds)
+                          scores=scores, seconds=seconds, hypotheses=pf.state.n)

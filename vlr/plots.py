@@ -79,7 +79,8 @@ def _pyplot() -> Any:
 
 def particle_cloud(path: str | Path, snapshots: Mapping[int, np.ndarray],
                    names: Sequence[str], iterations: Sequence[int] | None = None,
-                   truth: Mapping[int, np.ndarray] | None = None) -> Path:
+                   truth: Mapping[int, np.ndarray] | None = None,
+                   title: str = "particle cloud") -> Path:
     """Per finger, the particle sample's (proximal, distal) joint angles at chosen iterations.
 
     Args:
@@ -89,6 +90,7 @@ def particle_cloud(path: str | Path, snapshots: Mapping[int, np.ndarray],
         iterations: which to draw (default: `pick_iterations`, first to last); iterations
             without a snapshot are skipped.
         truth: optional {iteration: (N, K) true joint angles [rad]}, drawn as crosses.
+        title: what the points are ("sigma points" for the unscented Kalman filter's).
     Returns:
         the path written.
     """
@@ -106,8 +108,9 @@ def particle_cloud(path: str | Path, snapshots: Mapping[int, np.ndarray],
         for it, col in zip(its, colours, strict=True):
             th = np.degrees(snapshots[it][:, f, :])
             # The proximal joint and the last (distal) one: the pair the paper plots.
-            ax.scatter(th[:, 0], th[:, -1], s=3, color=col, alpha=0.35, linewidths=0,
-                       label=f"iteration {it}", rasterized=True)
+            # A few dozen sigma points drawn larger than thousands of particles.
+            ax.scatter(th[:, 0], th[:, -1], s=3 if len(th) > 200 else 14, color=col,
+                       alpha=0.35, linewidths=0, label=f"iteration {it}", rasterized=True)
             if truth is not None and it in truth:
                 t = np.degrees(np.asarray(truth[it])[f])
                 ax.plot(t[0], t[-1], "X", markerfacecolor=col, markeredgecolor="k",
@@ -121,7 +124,7 @@ def particle_cloud(path: str | Path, snapshots: Mapping[int, np.ndarray],
     for h in legend.legend_handles:
         h.set_alpha(1.0)
     if truth is not None:
-        fig.suptitle("particle cloud; X: ground truth at the same iteration", fontsize=9)
+        fig.suptitle(f"{title}; X: ground truth at the same iteration", fontsize=9)
     fig.tight_layout()
     return _save(fig, Path(path))
 

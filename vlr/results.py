@@ -23,11 +23,16 @@ COVERAGE_TOLERANCE_DEG = 0.1
 def summarize(result, model, settings, wall: float, final_truth=None) -> dict:
     """The result.json content: errors against the truth at the final iteration.
 
-    `settings` (`vlr.settings.Settings`) name the trial; all of them are written too."""
+    `settings` (`vlr.settings.Settings`) name the trial; all of them are written too. The
+    estimator's hypotheses are its particles or the UKF's sigma points; `timing.filter_s` is
+    the filter's time over the whole trial (its updates, not the world's rendering)."""
     n, k = model.n_fingers, model.n_joints
     w = settings.world
     out: dict = {"backend": w.backend, "object": w.object, "hand": w.hand,
-                 "true_hand": w.true_hand, "particles": settings.filter.particles,
+                 "true_hand": w.true_hand, "estimator": settings.filter.estimator,
+                 "particles": (settings.filter.particles if settings.filter.estimator == "pf"
+                               else None),
+                 "hypotheses": int(result.hypotheses),
                  "seed": settings.seed, "unknowns": list(settings.filter.unknowns),
                  "converged": bool(result.converged), "iterations": int(result.iterations),
                  "converged_at": result.converged_at,
@@ -35,7 +40,7 @@ def summarize(result, model, settings, wall: float, final_truth=None) -> dict:
                  "estimates": {name: vars(e) for name, e in result.theta.items()},
                  "unknown_estimates": {name: vars(e) for name, e in result.unknowns.items()},
                  "timing": {"filter_s_per_iteration_median": float(np.median(result.seconds)),
-                            "wall_s": wall}}
+                            "filter_s": float(np.sum(result.seconds)), "wall_s": wall}}
     # Per iteration (the grasp's update first): the convergence measure, and against the
     # truth the mean proximal error, so that a table can read either at any iteration.
     out["ci_deg_by_iteration"] = [round(float(r.ci_deg), 4) for r in result.history]

@@ -4,8 +4,10 @@ The tree (`Settings`) nests the components' own frozen dataclasses, each field w
 
     seed                       seeds the world, the filter and the actions
     world.*                    `WorldSettings`: backend, object, hand, true_hand, options
-    filter.*                   `vlr.filter.FilterConfig`: particles, unknowns, priors, the grasp
-                               prior, jitter and tempering
+    filter.*                   `vlr.filter.FilterConfig`: the estimator (pf or ukf), particles,
+                               unknowns, priors, the grasp prior, jitter and tempering
+    filter.ukf.*               `vlr.filter.UnscentedConfig`: the unscented Kalman filter
+                               (`vlr.ukf`)
     filter.motion.*            `vlr.motion.MotionConfig`: the motion model (Eq. 6-9)
     filter.observation.*       `vlr.observation.ObservationConfig`: the likelihood (Eq. 5)
     filter.object.*            `vlr.filter.ObjectBelief`: the object the filter believes

@@ -194,13 +194,14 @@ def _check_names(trials: list[Trial]) -> None:
     """A misspelt object, hand or unknown is one error now, not a failed trial per seed."""
     from vlr.kinematics import HandModel
     from vlr.spec import SpecError, load_hand, load_object
-    from vlr.world import check_unknowns
+    from vlr.world import check_estimator, check_unknowns
 
     seen: set = set()
     for t in trials:
         s, w = t.settings, t.settings.world
         key = (w.object, w.hand, w.true_hand, s.filter.unknowns,
-               json.dumps(s.filter.priors, sort_keys=True))
+               json.dumps(s.filter.priors, sort_keys=True), s.filter.estimator,
+               s.loop.exploration)
         if key in seen:
             continue
         seen.add(key)
@@ -210,6 +211,7 @@ def _check_names(trials: list[Trial]) -> None:
             if w.true_hand:
                 load_hand(w.true_hand)
             check_unknowns(s, model)
+            check_estimator(s)
         except (SpecError, FileNotFoundError, UserError) as exc:
             raise UserError(f"case {t.case!r}: {exc}") from None
 
@@ -280,6 +282,7 @@ COLUMNS: list[tuple[str, tuple[str, ...]]] = [
     ("case", ("case",)), ("group", ("group",)), ("backend", ("settings", "world.backend")),
     ("object", ("settings", "world.object")), ("hand", ("settings", "world.hand")),
     ("true_hand", ("settings", "world.true_hand")),
+    ("estimator", ("settings", "filter.estimator")),
     ("particles", ("settings", "filter.particles")),
     ("seed", ("settings", "seed")), ("status", ("status",)),
     ("converged", ("result", "converged")), ("iterations", ("result", "converged_at")),
@@ -290,6 +293,7 @@ COLUMNS: list[tuple[str, tuple[str, ...]]] = [
     ("coverage_tolerant", ("result", "coverage_tolerant")),
     ("prior_coverage", ("result", "prior_coverage")),
     ("s_per_iteration", ("result", "timing", "filter_s_per_iteration_median")),
+    ("s_per_trial", ("result", "timing", "filter_s")),
     ("grasp_lost_at", ("result", "grasp_lost_at")),
 ]
 
@@ -357,6 +361,11 @@ def _proximal_links_mm(errors: dict[str, Any]) -> float | None:
 
 def _row(rec: dict[str, Any]) -> dict[str, Any]:
     row = {name: _get(rec, path) for name, path in COLUMNS}
+    # Records from before the estimator was a setting ran the particle filter; the unscented
+    # Kalman filter has sigma points, not `filter.particles`.
+    row["estimator"] = row["estimator"] or "pf"
+    if row["estimator"] != "pf":
+        row["particles"] = None
     row["proximal_deg_at_15"] = _at_paper_budget(rec, "proximal_deg_by_iteration")
     # The paper's "joints" figure (its NH rows): every joint's error together. Records from
     # before it was written hold the proximal and distal means of two-joint fingers.
@@ -426,6 +435,7 @@ SUMMARY_COLUMNS = [("proximal [deg]", "proximal_deg", 2),
                    ("contact [mm]", "contact_mm", 2), ("iterations", "iterations", 1),
                    ("coverage", "coverage", 2), ("coverage (0.1 deg)", "coverage_tolerant", 2),
                    ("s/iteration", "s_per_iteration", 2),
+                   ("filter s/trial", "s_per_trial", 1),
                    ("proximal link error [mm]", "proximal_link_mm", 2),
                    ("proximal, median [deg]", "proximal_deg_median", 2),
                    ("proximal at 15, median [deg]", "proximal_deg_median_at_15", 2),
@@ -435,9 +445,9 @@ SUMMARY_COLUMNS = [("proximal [deg]", "proximal_deg", 2),
 
 # What the summary is always split by (row columns, and the settings they come from);
 # `varying_settings` adds a sweep's grid keys.
-SUMMARY_KEYS = ("case", "backend", "object", "hand", "true_hand", "particles")
+SUMMARY_KEYS = ("case", "backend", "object", "hand", "true_hand", "estimator", "particles")
 _SUMMARY_SETTINGS = ("world.backend", "world.object", "world.hand", "world.true_hand",
-                     "filter.particles")
+                     "filter.estimator", "filter.particles")
 
 
 def varying_settings(records: list[dict[str, Any]]) -> list[str]:
@@ -462,8 +472,8 @@ def _setting(rec: dict[str, Any], key: str) -> Any:
 
 def summarize_rows(rows: list[dict[str, Any]],
                    grid: Iterable[str] = ()) -> list[dict[str, str]]:
-    """Mean ± sd over seeds per (case, backend, object, hand, true hand, particles) and per
-    value of each `grid` setting (`varying_settings`)."""
+    """Mean ± sd over seeds per (case, backend, object, hand, true hand, estimator,
+    particles) and per value of each `grid` setting (`varying_settings`)."""
     key_names = (*SUMMARY_KEYS, *grid)
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for r in rows:

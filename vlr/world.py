@@ -18,7 +18,8 @@ import numpy as np
 
 from vlr.errors import UserError
 
-__all__ = ["World", "open_world", "hand_world", "check_unknowns", "grasp_guess"]
+__all__ = ["World", "open_world", "hand_world", "check_unknowns", "check_estimator",
+           "grasp_guess"]
 
 
 @dataclass
@@ -89,6 +90,16 @@ def check_unknowns(settings, model, obj=None) -> None:
             raise UserError(f"filter.unknowns {u!r}: {exc}") from None
 
 
+def check_estimator(settings) -> None:
+    """What `filter.estimator` cannot do is one UserError before a world opens: the unscented
+    Kalman filter with an unknown it does not carry or with active exploration
+    (`vlr.ukf.check_estimator`; imported only for the UKF)."""
+    if settings.filter.estimator == "ukf":
+        from vlr.ukf import check_estimator as check
+
+        check(settings.filter, settings.loop.exploration)
+
+
 def grasp_guess(settings, model, obj):
     """The grasp guess the prior is drawn about (`vlr.synthetic.nominal_grasp`): the nominal
     hand's equilibrium from `filter.guess_theta_deg`, in the filter's own motion model."""
@@ -130,6 +141,7 @@ def open_world(settings) -> World:
     model = HandModel.from_spec(hand_spec)
     obj = believed_object(settings, obj_spec)
     check_unknowns(settings, model, obj)  # before a backend opens (and must be closed)
+    check_estimator(settings)
     _check_turn(settings, model)
     nominal = grasp_guess(settings, model, obj)
     if backend.open_world is not None:

@@ -54,6 +54,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "modelo)")
     p.add_argument("--true-hand", help="sim or synthetic: the hand the world is built with, "
                    "e.g. nh1 (world.true_hand)")
+    p.add_argument("--estimator", choices=("pf", "ukf"), help="pf: the particle filter "
+                   "(default); ukf: the unscented Kalman filter on the same model "
+                   "(filter.estimator)")
     p.add_argument("--particles", type=int, help="P (filter.particles; default 60000)")
     p.add_argument("--seed", type=int, help="seeds the world, the filter and the actions "
                    "(default 0)")
@@ -86,7 +89,8 @@ def settings_from_args(args: argparse.Namespace):
     file_layer = read_yaml_mapping(args.settings, "--settings") if args.settings else {}
     flags = {"world.backend": args.backend, "world.object": args.object,
              "world.hand": args.hand, "world.true_hand": args.true_hand,
-             "filter.particles": args.particles, "seed": args.seed,
+             "filter.estimator": args.estimator, "filter.particles": args.particles,
+             "seed": args.seed,
              "loop.max_iterations": args.max_iterations,
              "world.options.config": args.config}
     flags = {k: v for k, v in flags.items() if v is not None}
@@ -169,7 +173,9 @@ def run(args: argparse.Namespace) -> int:
         result, summary, model, truths = run.result, run.summary, run.model, run.truths
         truth_at = ({r.iteration: t.theta for r, t in zip(result.history, truths, strict=True)}
                     if truths else None)
-        particle_cloud(out / "particles.png", cloud.snapshots, model.names, None, truth_at)
+        what = ("sigma points" if settings.filter.estimator == "ukf" else "particle cloud")
+        particle_cloud(out / "particles.png", cloud.snapshots, model.names, None, truth_at,
+                       title=what)
         print(format_table(result, summary, model))
         print(f"\nwrote {out / 'result.json'}, {out / 'history.npz'}, "
               f"{out / 'convergence.png'}, {out / 'particles.png'}")
@@ -215,6 +221,10 @@ def format_table(result, summary: dict, model) -> str:
                                      "answer leans on it"))
     lines.append(f"filter: {summary['timing']['filter_s_per_iteration_median']:.3f} s per "
                  "iteration (median)")
+    if summary.get("estimator") == "ukf":
+        lines[-1] = (f"filter: unscented Kalman filter, {summary['hypotheses']} sigma points, "
+                     f"{summary['timing']['filter_s_per_iteration_median']:.3f} s per "
+                     "iteration (median)")
     s = summary.get("settings", {})
     if s:
         turn = s.get("filter.observation.sigma_turn_deg") or 0.0
