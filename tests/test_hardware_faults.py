@@ -223,6 +223,9 @@ def test_a_signal_ends_a_run_with_one_line_and_torque_off(tmp_path, signals):
     emu, port = _emulate(emulator_config)
     try:
         data["bus"]["port"] = port
+        # The emulator is another process: on a loaded machine its replies can miss the
+        # 1 Mbaud packet timeout. This test is about signals: the bus waits generously.
+        data["bus"].update(latency_ms=200.0, retries=5)
         path = write_config(tmp_path, data)
         out = tmp_path / "tension.yaml"
         run = subprocess.Popen([sys.executable, "-m", "vlr.cli", "tension-calibrate",
