@@ -198,7 +198,7 @@ def test_a_motor_that_never_takes_its_goal_stops_the_run_naming_it(tmp_path):
 def _default_signals() -> None:
     """In the child: the signals' default actions. A run started under nohup, or in the
     background of a script, inherits SIGHUP or SIGINT ignored, and the hand leaves a signal
-    its program ignores alone."""
+    its program ignores alone (and so does the emulator, which the tests stop with SIGINT)."""
     for sig in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP):
         signal.signal(sig, signal.SIG_DFL)
 
@@ -207,7 +207,7 @@ def _emulate(config: Path) -> tuple[subprocess.Popen, str]:
     """`vlr emulate` in its own process; returns it and the port it serves."""
     proc = subprocess.Popen([sys.executable, "-m", "vlr.cli", "emulate", "--config",
                              str(config)], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
-                            text=True, cwd=ROOT)
+                            text=True, cwd=ROOT, preexec_fn=_default_signals)
     line = proc.stdout.readline()
     assert "emulating motors" in line, line + proc.stderr.read()
     return proc, line.rsplit(" on ", 1)[1].strip()
