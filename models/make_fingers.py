@@ -1,4 +1,4 @@
-"""Generate the visual meshes (STL) of the original finger and the novel fingers NF1-NF3.
+"""Generate the visual meshes (STL) of the original finger and the novel fingers NF1-NF5.
 
 Each link mesh is in its own link frame (vlr/spec.py): the link starts at its joint axis and
 runs along +z; +y is the inward (flexion) side. Collision uses the spec's primitives (a box per
@@ -67,6 +67,8 @@ FINGERS = {
     "nf1": (0.040, 0.040, "straight", (0.0, 0.003, 0.027), 0.012, 0.018),
     "nf2": (0.050, 0.052, "hook", (0.0, 0.004, 0.036), 0.012, 0.016),
     "nf3": (0.050, 0.038, "paddle", (0.0, 0.002, 0.024), 0.012, 0.022),
+    "nf4": (0.070, 0.050, "straight", (0.0, 0.003, 0.036), 0.010, 0.018),
+    "nf5": (0.055, 0.040, "paddle", (0.0, 0.005, 0.026), 0.015, 0.020),
 }
 
 

@@ -26,7 +26,7 @@ from pathlib import Path
 from models import ROOT
 
 OUT_DIR = ROOT / "mjcf"
-HANDS = ("modelo", "modelo_thumb45", "nh1", "nh2", "nh3")
+HANDS = ("modelo", "modelo_thumb45", "nh1", "nh2", "nh3", "nh4", "nh5")
 # Objects whose scene needs a task builder (sim/scenes.py), not the standard one.
 TASK_OBJECTS = ("maze_holder",)
 ASSET_SUFFIXES = (".stl", ".obj", ".png")

@@ -216,10 +216,11 @@ def build_object(obj: ObjectSpec) -> mjcf.RootElement:
         rad, half = obj.size
         body.add("geom", name="body", type="cylinder", size=[rad, half],
                  pos=[0, 0, c + rad], quat=[math.sqrt(0.5), 0, math.sqrt(0.5), 0], **col)
-        sl, sr = ext["shaft_length"], ext["shaft_radius"]
-        body.add("geom", name="shaft", type="capsule", size=[sr, sl / 2],
-                 pos=[half + sl / 2, 0, c + rad], quat=[math.sqrt(0.5), 0, math.sqrt(0.5), 0],
-                 **col)
+        if "shaft_length" in ext:  # the screwdriver's shaft beyond the handle, along +x_O
+            sl, sr = ext["shaft_length"], ext["shaft_radius"]
+            body.add("geom", name="shaft", type="capsule", size=[sr, sl / 2],
+                     pos=[half + sl / 2, 0, c + rad],
+                     quat=[math.sqrt(0.5), 0, math.sqrt(0.5), 0], **col)
     elif obj.shape == "cylinder" and ext.get("upright"):
         _upright_cup(body, obj, col)
     elif obj.shape == "cylinder":
