@@ -9,14 +9,8 @@ metrics and result files as the baseline), then one summary puts them side by si
 `goal_step` is a policy as a learner sees the task: it reads the observation only (the
 camera's goals and the commands), never the filter or the truth. It probes with a few random
 moves, fits the goal's response to the tendons by least squares over its own moves, and steps
-towards the desired goal. A learning library's agent is a policy too: give it a factory that
-returns its `predict`, e.g. with Stable-Baselines3 (an optional install, not the project's):
-
-    def agent(env):
-        model = PPO.load("my_agent.zip")
-        return lambda obs: model.predict(obs, deterministic=True)[0]
-
-and add "examples/my_agent.py:agent" to `--policies`.
+towards the desired goal. A learning library's agent is a policy too, a factory that returns
+its `predict`: examples/sb3_agent.py trains Stable-Baselines3's PPO and runs it here.
 """
 
 from __future__ import annotations
