@@ -34,12 +34,9 @@ N_PRM = 13
 # Layout of a rolling frame (one per contact): local centre of curvature in O (3), contact
 # normal in the palm frame (3), the finger's summed joint angles (1), the object rotation
 # R_PO (9, row-major) at the start of the solve, the contact's normal force then (1) [N]
-# (it sets the friction's limits), the local surface's radius of curvature rho (1) [m]:
-# the contact's own, so that a particle can carry an unknown curvature (`vlr.unknowns`), and
-# for a contact on a cylinder's side the cylinder's axis in O (3; zero elsewhere: the local
-# surface is then the sphere about the centre, `vlr.surface.local_centres`).
-RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, RL_FORCE, RL_RHO, RL_AXIS, N_RL = (
-    0, 3, 6, 7, 16, 17, 18, 21)
+# (it sets the friction's limits), and the local surface's radius of curvature rho (1) [m]:
+# the contact's own, so that a particle can carry an unknown curvature (`vlr.unknowns`).
+RL_CENTRE, RL_NORMAL, RL_PHI, RL_ROT, RL_FORCE, RL_RHO, N_RL = 0, 3, 6, 7, 16, 17, 18
 
 
 @njit(cache=True, inline='always', _nrt=False)
@@ -76,49 +73,6 @@ def _separation(bp, rb, i, fx, fy, fz, p, R, ox, oy, oz):
             - p[1] - (R[1, 0] * ox + R[1, 1] * oy + R[1, 2] * oz),
             bp[i, 2] + rb[i, 2, 0] * fx + rb[i, 2, 1] * fy + rb[i, 2, 2] * fz
             - p[2] - (R[2, 0] * ox + R[2, 1] * oy + R[2, 2] * oz))
-
-
-@njit(cache=True, inline='always', _nrt=False)
-def _to_axis(d0, d1, d2, R, rl, i):
-    """The separation (d0, d1, d2) from contact i's local centre to a point, made relative
-    to the nearest point of the local axis when the contact has one (rl[i, RL_AXIS:], a
-    cylinder's side): returns the separation from that nearest point, the palm-frame axis u
-    and t, how far the nearest point lies along the axis from the centre. Without an axis,
-    u = 0 and t = 0 (a sphere)."""
-    a0, a1, a2 = rl[i, RL_AXIS], rl[i, RL_AXIS + 1], rl[i, RL_AXIS + 2]
-    if a0 == 0.0 and a1 == 0.0 and a2 == 0.0:
-        return d0, d1, d2, 0.0, 0.0, 0.0, 0.0
-    u0 = R[0, 0] * a0 + R[0, 1] * a1 + R[0, 2] * a2
-    u1 = R[1, 0] * a0 + R[1, 1] * a1 + R[1, 2] * a2
-    u2 = R[2, 0] * a0 + R[2, 1] * a1 + R[2, 2] * a2
-    t = d0 * u0 + d1 * u1 + d2 * u2
-    return d0 - t * u0, d1 - t * u1, d2 - t * u2, u0, u1, u2, t
-
-
-@njit(cache=True, _nrt=False)
-def _axis_curvature(i, k_n, nf, dist, dv, u, a0, a1, a2, R, jac, M, B, C):
-    """The Hessian terms a cylinder's axis adds to the pad-to-axis penalty: its direction
-    u = R a turns with the object. nf = k_c g (the penalty's force along dv); jac and M as
-    `_pair` left them for the pad centre and the axis point nearest it (where the
-    separation is normal to u). With U_b = R (e_b x a) and k_b = dv . U_b:
-    w-w: -nf (dist k_b k_c + (M_b . u) k_c + (M_c . u) k_b); theta_j-w_c: -nf (J_j . u) k_c;
-    p_b-w_c: nf u_b k_c (second derivatives of 1/2 k_c (|P_u v| - reach)^2)."""
-    w0 = dv[0] * R[0, 0] + dv[1] * R[1, 0] + dv[2] * R[2, 0]    # R^T dv
-    w1 = dv[0] * R[0, 1] + dv[1] * R[1, 1] + dv[2] * R[2, 1]
-    w2 = dv[0] * R[0, 2] + dv[1] * R[1, 2] + dv[2] * R[2, 2]
-    k = (w2 * a1 - w1 * a2, w0 * a2 - w2 * a0, w1 * a0 - w0 * a1)
-    mdu = (M[0, 0] * u[0] + M[1, 0] * u[1] + M[2, 0] * u[2],    # M_b . u
-           M[0, 1] * u[0] + M[1, 1] * u[1] + M[2, 1] * u[2],
-           M[0, 2] * u[0] + M[1, 2] * u[1] + M[2, 2] * u[2])
-    for b in range(3):
-        for c in range(3):
-            C[3 + b, 3 + c] -= nf * (dist * k[b] * k[c] + mdu[b] * k[c] + mdu[c] * k[b])
-            C[b, 3 + c] += nf * u[b] * k[c]
-            C[3 + c, b] += nf * u[b] * k[c]
-    for j in range(k_n):
-        ju = jac[j, 0] * u[0] + jac[j, 1] * u[1] + jac[j, 2] * u[2]
-        for c in range(3):
-            B[i, j, 3 + c] -= nf * ju * k[c]
 
 
 @njit(cache=True, inline='always', _nrt=False)
@@ -410,13 +364,6 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
             pz = qz[k_n - 1] - pad_xy[i, 1] * s_last + pcz * c_last
             d0, d1, d2 = _separation(base_pos, rb, i, px, py, pz, p, R,
                                      rl[i, 0], rl[i, 1], rl[i, 2])
-            # On a cylinder's side, from the axis point nearest the pad centre (where the
-            # first derivatives of the axis's turn vanish).
-            d0, d1, d2, u0, u1, u2, t_ax = _to_axis(d0, d1, d2, R, rl, i)
-            ox = rl[i, 0] + t_ax * rl[i, RL_AXIS]
-            oy = rl[i, 1] + t_ax * rl[i, RL_AXIS + 1]
-            oz = rl[i, 2] + t_ax * rl[i, RL_AXIS + 2]
-            uv = (u0, u1, u2)
             dist = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2)
             reach = rl[i, RL_RHO] + pad_r[i]
             g = dist - reach
@@ -426,13 +373,10 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
             for a in range(3):
                 gam[a] = kc * g * dv[a]
                 for b in range(3):
-                    G[a, b] = kc * (sc * ((1.0 if a == b else 0.0) - uv[a] * uv[b])
+                    G[a, b] = kc * (sc * (1.0 if a == b else 0.0)
                                     + (reach / dist) * dv[a] * dv[b])
-            _pair(i, k_n, px, py, pz, ox, oy, oz, gam, G, 0.0, rb, R, qy,
+            _pair(i, k_n, px, py, pz, rl[i, 0], rl[i, 1], rl[i, 2], gam, G, 0.0, rb, R, qy,
                   qz, jac, M, lam, gt, gA, A, B, gC, C)
-            if u0 != 0.0 or u1 != 0.0 or u2 != 0.0:
-                _axis_curvature(i, k_n, kc * g, dist, dv, uv, rl[i, RL_AXIS],
-                                rl[i, RL_AXIS + 1], rl[i, RL_AXIS + 2], R, jac, M, B, C)
             if spin_on:
                 _spin_apply(i, k_n, f1, f2, cxs, j0, j1, j2, gA, A, B, gC, C)
         # Eq. 8 as a stiff penalty: the contact (fixed in D) stays at its anchor (fixed in O).
@@ -478,7 +422,7 @@ def _normal_force(i, th, seg, nrm, rl, p, R, base_pos, base_rot, pad_xy, pad_r, 
                   sphi, cphi, qy, qz):
     """Contact i's normal force in the rolling term at the current configuration [N]: k_c
     times how far finger i's pad sphere sinks into the object's local sphere (rl[i, :3]),
-    or its local cylinder (`_to_axis`)."""
+    """
     k_n = th.shape[1]
     _finger_chain(th, seg, nrm, i, 1.0, pad_xy[i, 0], pad_xy[i, 1], pad_r[i], sphi, cphi,
                   qy, qz)
@@ -488,7 +432,6 @@ def _normal_force(i, th, seg, nrm, rl, p, R, base_pos, base_rot, pad_xy, pad_r, 
     pz = qz[k_n - 1] - pad_xy[i, 1] * s_last + pcz * c_last
     d0, d1, d2 = _separation(base_pos, base_rot, i, pad_xy[i, 0], py, pz, p, R,
                              rl[i, 0], rl[i, 1], rl[i, 2])
-    d0, d1, d2 = _to_axis(d0, d1, d2, R, rl, i)[:3]
     g = math.sqrt(d0 * d0 + d1 * d1 + d2 * d2) - (rl[i, RL_RHO] + pad_r[i])
     return prm[P_KC] * max(0.0, -g)
 
@@ -927,43 +870,16 @@ def _surface_normals(th, nrm, base_rot, R, RD, m):
             m[i, b] = -t
 
 
-@njit(cache=True, inline='always', _nrt=False)
-def _side_normal(mx, my, mz, srf, cyl):
-    """A cylinder's outward normal m made normal to its axis and unit, and whether the contact
-    is on the side (m within 60 degrees of normal to the axis; else an end face, flat, or not
-    a cylinder): `vlr.surface._side_normals`."""
-    if not cyl:
-        return mx, my, mz, False
-    a0, a1, a2 = srf[S_AXIS], srf[S_AXIS + 1], srf[S_AXIS + 2]
-    ma = mx * a0 + my * a1 + mz * a2
-    s0, s1, s2 = mx - ma * a0, my - ma * a1, mz - ma * a2
-    sl = math.sqrt(s0 * s0 + s1 * s1 + s2 * s2)
-    if sl <= 0.5:
-        return mx, my, mz, False
-    return s0 / sl, s1 / sl, s2 / sl, True
-
-
 @njit(cache=True, _nrt=False)
 def _rolling_frames(th, anc, R, m, rho_q, srf, has_rho, rl):
     """rl (N, N_RL): the rolling term's frames without friction (`MotionModel.rolling_frames`,
     forces 0): local centres a - rho m, the normals R m, the summed angles, R, rho."""
     n_f, k_n = th.shape
-    cyl = int(srf[S_KIND]) == SURF_CYLINDER
     for i in range(n_f):
         rk = rho_q[i] if has_rho else srf[S_KERNEL]
-        sx, sy, sz, on_side = _side_normal(m[i, 0], m[i, 1], m[i, 2], srf, cyl)
         for b in range(3):
+            rl[i, RL_CENTRE + b] = anc[i, b] - rk * m[i, b]
             rl[i, RL_NORMAL + b] = R[b, 0] * m[i, 0] + R[b, 1] * m[i, 1] + R[b, 2] * m[i, 2]
-        if on_side:    # the cylinder's axis through a - rho m_side
-            rl[i, RL_CENTRE] = anc[i, 0] - rk * sx
-            rl[i, RL_CENTRE + 1] = anc[i, 1] - rk * sy
-            rl[i, RL_CENTRE + 2] = anc[i, 2] - rk * sz
-            for b in range(3):
-                rl[i, RL_AXIS + b] = srf[S_AXIS + b]
-        else:
-            for b in range(3):
-                rl[i, RL_CENTRE + b] = anc[i, b] - rk * m[i, b]
-                rl[i, RL_AXIS + b] = 0.0
         phi = 0.0
         for k in range(k_n):
             phi += th[i, k]
@@ -991,14 +907,9 @@ def _roll_contacts(th, seg, nrm, anc, p, R, m, rho_q, srf, has_rho, base_pos, ba
         dn = d0 * mx + d1 * my + d2 * mz
         t0, t1, t2 = d0 - dn * mx, d1 - dn * my, d2 - dn * mz
         rk = rho_q[i] if has_rho else srf[S_KERNEL]
-        sx, sy, sz, on_side = _side_normal(mx, my, mz, srf, kind == SURF_CYLINDER)
-        g0 = cen[0] - (anc[i, 0] - rk * sx)
-        g1 = cen[1] - (anc[i, 1] - rk * sy)
-        g2 = cen[2] - (anc[i, 2] - rk * sz)
-        if on_side:    # the rolling term's gap: from the cylinder's axis
-            ga = g0 * srf[S_AXIS] + g1 * srf[S_AXIS + 1] + g2 * srf[S_AXIS + 2]
-            g0, g1, g2 = (g0 - ga * srf[S_AXIS], g1 - ga * srf[S_AXIS + 1],
-                          g2 - ga * srf[S_AXIS + 2])
+        g0 = cen[0] - (anc[i, 0] - rk * mx)
+        g1 = cen[1] - (anc[i, 1] - rk * my)
+        g2 = cen[2] - (anc[i, 2] - rk * mz)
         gap = math.sqrt(g0 * g0 + g1 * g1 + g2 * g2) - (rk + pad_r[i])
         ox, oy, oz = mx, my, mz
         if not (kind == SURF_PLANE and not has_rho):

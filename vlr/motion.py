@@ -462,8 +462,7 @@ class MotionModel:
     def rolling_frames(self, state: ParticleState, normals_o: np.ndarray | None = None,
                        forces: bool = True) -> np.ndarray:
         """(P, N, `kern.N_RL`) what the rolling term holds fixed during a solve: each
-        contact's local centre of curvature in O, a - rho m, and on a cylinder's side its axis
-        (`vlr.surface.local_centres`),
+        contact's local centre of curvature in O, a - rho m (`vlr.surface.local_centres`),
         its normal in the palm frame, R m (m: the object's outward normal at the contact, in
         O), the finger's summed joint angles, the object's rotation (for the spin term), the
         contact's normal force (`normal_forces`; it sets the friction's limits; 0 if not
@@ -473,8 +472,7 @@ class MotionModel:
              if normals_o is None else normals_o)
         out = np.empty(m.shape[:2] + (kern.N_RL,))
         rho = self.contact_rho(state)
-        (out[..., kern.RL_CENTRE:kern.RL_CENTRE + 3],
-         out[..., kern.RL_AXIS:kern.RL_AXIS + 3]) = local_centres(
+        out[..., kern.RL_CENTRE:kern.RL_CENTRE + 3] = local_centres(
             self.obj.surface, state.anchors, m, rho)
         out[..., kern.RL_RHO] = self.obj.surface.kernel_radius if rho is None else rho
         out[..., kern.RL_NORMAL:kern.RL_NORMAL + 3] = np.einsum("pab,pnb->pna", state.rot, m)
@@ -485,14 +483,13 @@ class MotionModel:
 
     def normal_forces(self, state: ParticleState, frames: np.ndarray) -> np.ndarray:
         """(P, N) each contact's normal force in the rolling term [N]: k_c times how far the
-        pad sphere sinks into the object's local sphere or cylinder (the rolling `frames`'
-        centres and axes in O, radii rho), 0 where they part."""
+        pad sphere sinks into the object's local sphere (the rolling `frames`' centres in O,
+        radii rho), 0 where they part."""
         centre = contact_points(self.model, state.theta, np.zeros_like(state.normals),
                                 state.segments)
         local = state.pos[:, None, :] + np.einsum(
             "pab,pnb->pna", state.rot, frames[..., kern.RL_CENTRE:kern.RL_CENTRE + 3])
-        axes = np.einsum("pab,pnb->pna", state.rot, frames[..., kern.RL_AXIS:kern.RL_AXIS + 3])
-        gap = pad_gaps(centre, local, frames[..., kern.RL_RHO] + self.model.pad_radius, axes)
+        gap = pad_gaps(centre, local, frames[..., kern.RL_RHO] + self.model.pad_radius)
         return self.config.contact_stiffness * np.maximum(0.0, -gap)
 
     def contact_rho(self, state: ParticleState) -> np.ndarray | None:
@@ -773,8 +770,7 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
         tangential = d - np.sum(d * n, axis=-1, keepdims=True) * n
         centre = contact_points(m, theta, np.zeros_like(state.normals[q]), state.segments[q])
         gap = pad_gaps(centre, pos + roll[:, kern.RL_CENTRE:kern.RL_CENTRE + 3] @ rot.T,
-                       roll[:, kern.RL_RHO] + m.pad_radius,
-                       roll[:, kern.RL_AXIS:kern.RL_AXIS + 3] @ rot.T)
+                       roll[:, kern.RL_RHO] + m.pad_radius)
         kc = cfg.contact_stiffness
         e += 0.5 * kc * np.sum(gap**2)
         spin = np.zeros(len(roll))

@@ -15,8 +15,7 @@ described by its kind and curvature (known from the object, `LocalSurface.from_s
 anchored at each particle's own contact point and normal, so the filter needs no global
 object model: a plane (a box face: exact), a sphere of radius rho (the apple), or a cylinder
 of radius rho about an axis fixed in O (the wine glass's bowl, the screwdriver's handle, a
-cup's wall), the pad held at rho + r from the axis. Treating a sphere as flat was measured to
-raise the per-action gap to 0.11.
+cup's wall). Treating a sphere as flat was measured to raise the per-action gap to 0.11.
 
 Known limits: sliding is not modelled (friction is assumed to hold), nor is the second-order
 error within one action (`MotionConfig.rolling_substeps` splits an action to shrink it).
@@ -69,10 +68,10 @@ class LocalSurface:
 
     @property
     def kernel_radius(self) -> float:
-        """The radius the motion model's rolling term holds a pad at [m]: the sphere's own,
-        a cylinder's (from its axis on the side, `local_centres`), and 10 m for a plane (a
-        sphere flat within 0.1% of a pad's travel; an infinite radius has no centre to hold
-        fixed: `FLAT_CURVATURE`)."""
+        """The radius of the local sphere the motion model's rolling term uses [m]: the
+        sphere's own, a cylinder's (a sphere of its radius: exact around the axis, too
+        curved along it; `local_centres`), and 10 m for a plane (flat within 0.1% of a pad's
+        travel; an infinite radius has no centre to hold fixed: `FLAT_CURVATURE`)."""
         return 1.0 / FLAT_CURVATURE if self.kind == "plane" else self.radius
 
     @property
@@ -129,22 +128,16 @@ def _side_normals(surface: LocalSurface, m: np.ndarray) -> tuple[np.ndarray, np.
 
 
 def local_centres(surface: LocalSurface, anchors: np.ndarray, m: np.ndarray,
-                  rho: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+                  rho: np.ndarray | None = None) -> np.ndarray:
     """What the motion model's rolling term holds each pad to, in O: the local centre of
-    curvature a - rho m (the local sphere's, `LocalSurface.kernel_radius`) and, for a contact
-    on a cylinder's side, the cylinder's axis through a - rho m_side, m made normal to the
-    axis (else a zero axis: the sphere about the centre). (P, N, 3) each; `m` the object's
-    outward normals at the contacts `anchors` (`surface_normals`); `rho` (P, N) each
-    contact's own radius of curvature [m] (an unknown curvature, `contact_radii`), None: the
-    surface's."""
-    axes = np.zeros_like(m)
+    curvature a - rho m (the local sphere's, `LocalSurface.kernel_radius`; a cylinder's side
+    is held to a sphere of its radius: exact across the axis, too curved along it, which
+    measured no worse than holding the pad to the axis, docs/DECISIONS.md). (P, N, 3); `m`
+    the object's outward normals at the contacts `anchors` (`surface_normals`); `rho` (P, N)
+    each contact's own radius of curvature [m] (an unknown curvature, `contact_radii`), None:
+    the surface's."""
     r = surface.kernel_radius if rho is None else np.asarray(rho, dtype=float)[..., None]
-    if surface.kind != "cylinder":
-        return anchors - r * m, axes
-    m_side, on_side = _side_normals(surface, m)
-    centres = np.where(on_side, anchors - r * m_side, anchors - r * m)
-    axes[...] = np.where(on_side, np.asarray(surface.axis, dtype=float), 0.0)
-    return centres, axes
+    return anchors - r * m
 
 
 def contact_radii(curvature: np.ndarray) -> np.ndarray:
@@ -154,15 +147,10 @@ def contact_radii(curvature: np.ndarray) -> np.ndarray:
     return 1.0 / np.maximum(np.asarray(curvature, dtype=float), FLAT_CURVATURE)
 
 
-def pad_gaps(centre: np.ndarray, local: np.ndarray, reach: np.ndarray | float,
-             axes: np.ndarray | None = None) -> np.ndarray:
+def pad_gaps(centre: np.ndarray, local: np.ndarray, reach: np.ndarray | float) -> np.ndarray:
     """(...) the rolling term's gap: each pad centre's distance from its local centre of
-    curvature `local`, or from its local axis through it (`axes`, unit; zero or None: none),
-    less the reach rho + r (negative: the pad sinks in). All in one frame."""
-    d = centre - local
-    if axes is not None:
-        d = d - np.sum(d * axes, axis=-1, keepdims=True) * axes
-    return np.linalg.norm(d, axis=-1) - reach
+    curvature `local`, less the reach rho + r (negative: the pad sinks in). One frame."""
+    return np.linalg.norm(centre - local, axis=-1) - reach
 
 
 def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
@@ -198,9 +186,9 @@ def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
     # The residuals as the motion model's rolling term sees them (its local sphere).
     d = contact - anchors
     tangential = d - np.sum(d * normals_before, axis=-1, keepdims=True) * normals_before
-    local, axes = local_centres(surface, anchors, normals_before, rho)
+    local = local_centres(surface, anchors, normals_before, rho)
     reach = surface.kernel_radius if rho is None else np.asarray(rho, dtype=float)
-    gap = pad_gaps(centre, local, reach + radius[..., 0], axes)[..., None]
+    gap = pad_gaps(centre, local, reach + radius[..., 0])[..., None]
     if math.isfinite(slide_friction):
         cap = slide_friction * np.maximum(0.0, -gap)
         t = np.linalg.norm(tangential, axis=-1, keepdims=True)
