@@ -100,12 +100,21 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--actions", type=int, default=50)
     ap.add_argument("--seeds", type=_seeds, default=list(range(5)))
     args = ap.parse_args(argv)
+    if args.actions < 1:
+        ap.error(f"--actions {args.actions}: must be at least 1")
     for p in args.pairs:
         if p.count(":") != 1:
             ap.error(f"pair {p!r}: expected HAND:OBJECT")
+    from vlr.spec import load_hand, load_object
+
+    pairs = [p.split(":") for p in args.pairs]
+    for hand, obj in pairs:
+        try:
+            load_hand(hand), load_object(obj)
+        except ValueError as exc:   # a spec file's error: one line
+            ap.error(str(exc))
     failed = 0
-    for p in args.pairs:
-        hand, obj = p.split(":")
+    for hand, obj in pairs:
         r = check_hold(hand, obj, args.seeds, args.actions)
         failed += not r.ok
         print(f"{hand}:{obj}: held {r.held}/{r.seeds}, tag seen {r.tag_seen}/{r.seeds}, "

@@ -52,3 +52,16 @@ def test_validation_nh4_unknown_links():
     # Measured (20 actions): link 2.79 mm, proximal 1.27 deg, coverage 0.75.
     assert r["errors"]["link_length_mm"]["right"] < 4.0
     assert r["errors"]["proximal_deg_mean"] < 2.0
+
+
+@pytest.mark.parametrize("argv, named", [(["modelo:nosuch"], "nosuch"),
+                                         (["modelo"], "HAND:OBJECT"),
+                                         (["--actions", "0", "modelo:apple"], "--actions 0")])
+def test_check_grasps_bad_input_is_one_line(argv, named, capsys):
+    from models.check_grasps import main
+
+    with pytest.raises(SystemExit) as exc:
+        main(argv)
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert named in err[-1] and "Traceback" not in "".join(err)
