@@ -81,23 +81,25 @@ def test_sim_from_rendered_frames(obj, max_proximal_deg):
 
 
 def test_sim_unknown_thumb_distal_stiffness():
-    # Measured (3k particles, 20 actions, the sim's defaults, seeds 0 and 2): the replaced
-    # spring (true 0.045 N m/rad, the filter's nominal 0.030) found to 0.0051 and 0.0029,
-    # intervals 0.041-0.060 and 0.035-0.061, proximal 3.4 and 1.7 deg (seed 1: 0.0097,
-    # interval 0.047-0.064, missing it; the paper 0.0026; one seed at 3k particles scatters
-    # by a factor 2, hence two). The Liu-West draw on the spring's values instead of its
+    # Measured (3k particles, 20 actions, the sim's defaults, seeds 0-4, on an AMD EPYC): the
+    # replaced spring (true 0.045 N m/rad, the filter's nominal 0.030) found to 0.0066, 0.0048,
+    # 0.0035, 0.0000 and 0.0031 (median 0.0035; the paper 0.0026), every 95% interval holding
+    # it. The figures move by up to 0.0015 between CPUs (another machine gave 0.0051 on seed 0
+    # and missed the interval on seed 1), and one seed at 3k particles scatters by a factor 2:
+    # hence the median of five. The Liu-West draw on the spring's values instead of its
     # logarithm gave 0.0067 on seed 0 alone; the prior's mean (uniform, 0.0075-0.12) is 0.019
     # off.
-    errors = []
-    for seed in (0, 2):
+    errors, covered = [], 0
+    for seed in range(5):
         r = _run({"world.backend": "sim", "world.object": "toy_block",
                   "world.true_hand": "modelo_thumb45", "filter.particles": 3000, "seed": seed,
                   "loop.max_iterations": 20, "filter.unknowns": ["stiffness:thumb.distal"]},
                  SIM_GUESS)
         est = r["unknown_estimates"]["stiffness:thumb.distal"]
-        assert est["low"] <= 0.045 <= est["high"]
+        covered += est["low"] <= 0.045 <= est["high"]
         errors.append(r["errors"]["stiffness"]["thumb.distal"])
-    assert np.mean(errors) < 0.005
+    assert covered >= 4
+    assert np.median(errors) < 0.005
 
 
 def test_sim_unknown_object_mass():
