@@ -258,6 +258,10 @@ def _object_inertia(obj: ObjectSpec) -> list[float]:
     return _box_inertia(m, *(2 * s))
 
 
+# How far an upright cup's wall boxes stop above its outer bottom face [m] (`_upright_cup`).
+WALL_CLEARANCE = 2e-4
+
+
 def cup_dimensions(obj: ObjectSpec) -> dict[str, float]:
     """An upright cup's dimensions [m] (`_upright_cup`): rim and bottom outer radii, outer
     height, wall and bottom thickness, taper [rad], and heights along -z_O from O (the tag
@@ -299,8 +303,13 @@ def _upright_cup(body, obj: ObjectSpec, col: dict, segments: int = 24) -> None:
     # width is the rim's chord (a little over): the ring is closed at the rim, and below it
     # the boxes overlap outward only (an extended edge of a convex polygon lies outside it).
     seg_half = rt * math.tan(math.pi / segments) * 1.02
-    length = h / math.cos(t)
-    r_mid = 0.5 * (rb + rt) - 0.5 * w / math.cos(t)
+    # A box leaning out by t reaches (w/2) sin t below the outer bottom face: its bottom end
+    # is cut back to WALL_CLEARANCE above it, so that a level cup touches a table or a
+    # larger cup's floor with its bottom disc alone, not with 48 wall corners as well (they
+    # were three quarters of a cup scene's step).
+    cut = (0.5 * w * math.sin(t) + WALL_CLEARANCE) / math.cos(t)
+    length = h / math.cos(t) - cut
+    r_mid = 0.5 * (rb + rt) - 0.5 * w / math.cos(t) + 0.5 * cut * math.sin(t)
     q_tilt = (math.cos(-t / 2), 0.0, math.sin(-t / 2), 0.0)   # about y: the top leans out
     for k in range(segments):
         a = 2 * math.pi * k / segments
@@ -308,7 +317,8 @@ def _upright_cup(body, obj: ObjectSpec, col: dict, segments: int = 24) -> None:
         mujoco.mju_mulQuat(q, np.array([math.cos(a / 2), 0.0, 0.0, math.sin(a / 2)]),
                            np.array(q_tilt))
         body.add("geom", name=f"wall{k}", type="box", size=[w / 2, seg_half, length / 2],
-                 pos=[r_mid * math.cos(a), r_mid * math.sin(a), z0 - h / 2],
+                 pos=[r_mid * math.cos(a), r_mid * math.sin(a),
+                      z0 - h / 2 - 0.5 * cut * math.cos(t)],
                  quat=q.tolist(), **col)
 
 
