@@ -152,7 +152,8 @@ class SimHand:
         self._l_open = np.array([-np.dot(m.finger.pulley_radii, m.finger.open_angles)
                                  for m in self._true.mounts])
         self._u = np.zeros(len(self._slots))
-        self._renderer: mujoco.Renderer | None = None
+        # The offscreen renderers (EGL contexts) by view, made by `sim.camera`.
+        self.renderers: dict[object, mujoco.Renderer] = {}
         self._calibration = None
         self._grasped = False
         self._reset_state()
@@ -269,12 +270,10 @@ class SimHand:
         return Frame(image=image, stamp=float(self.data.time))
 
     def close(self) -> None:
-        """Free the offscreen renderers (EGL contexts) explicitly, not at interpreter exit."""
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-        for r in self.__dict__.pop("_scene_renderers", {}).values():
+        """Free the offscreen renderers (EGL contexts) now, not at interpreter exit."""
+        for r in self.renderers.values():
             r.close()
+        self.renderers.clear()
 
     def __enter__(self) -> SimHand:
         return self

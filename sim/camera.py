@@ -6,6 +6,8 @@ the one place where MuJoCo's camera frame becomes OpenCV's.
 
 from __future__ import annotations
 
+import atexit
+import weakref
 from typing import TYPE_CHECKING
 
 import mujoco
@@ -35,17 +37,44 @@ def calibration_of(model: mujoco.MjModel, data: mujoco.MjData,
     return calibration_from_mujoco_camera(float(model.cam_fovy[cam]), int(w), int(h), pos, xmat)
 
 
+def _visual_option() -> mujoco.MjvOption:
+    """Only visual geoms (group 2) and the tag: collision duplicates (group 3) hidden, and
+    no sites (the POM site would mark the tag's centre)."""
+    opt = mujoco.MjvOption()
+    opt.geomgroup[:] = [1, 1, 1, 0, 0, 0]
+    opt.sitegroup[:] = 0
+    return opt
+
+
+_VISUAL = _visual_option()
+# Hands with open renderers, closed at exit before EGL is: `atexit` runs its handlers last
+# registered first, and mujoco.egl registers its teardown when the first renderer is made;
+# a renderer left to the garbage collector at exit printed EGL tracebacks.
+_OPEN: weakref.WeakSet = weakref.WeakSet()
+
+
+def _close_open() -> None:
+    for hand in list(_OPEN):
+        hand.close()
+
+
+def _renderer(hand: SimHand, key: object, width: int, height: int) -> mujoco.Renderer:
+    """The hand's renderer for `key`, made on first use."""
+    r = hand.renderers.get(key)
+    if r is None:
+        r = hand.renderers[key] = mujoco.Renderer(hand.model, height=height, width=width)
+        if not _OPEN:
+            atexit.unregister(_close_open)
+            atexit.register(_close_open)
+        _OPEN.add(hand)
+    return r
+
+
 def render_palm_camera(hand: SimHand) -> np.ndarray | None:
     """An RGB frame of the palm camera after the hand's camera effects (None = dropped)."""
     opts = hand.options
-    if hand._renderer is None:
-        hand._renderer = mujoco.Renderer(hand.model, height=opts.height, width=opts.width)
-        hand._scene_option = mujoco.MjvOption()
-        # Only visual geoms (group 2) and the tag; collision duplicates (group 3) hidden.
-        hand._scene_option.geomgroup[:] = [1, 1, 1, 0, 0, 0]
-        hand._scene_option.sitegroup[:] = 0  # the POM site would mark the tag's centre
-    r = hand._renderer
-    r.update_scene(hand.data, camera=CAMERA_NAME, scene_option=hand._scene_option)
+    r = _renderer(hand, "palm", opts.width, opts.height)
+    r.update_scene(hand.data, camera=CAMERA_NAME, scene_option=_VISUAL)
     image = r.render()
     if opts.effects is None:
         return image
@@ -57,13 +86,6 @@ def render_palm_camera(hand: SimHand) -> np.ndarray | None:
 def render_scene(hand: SimHand, width: int = 640, height: int = 480,
                  camera: str = "scene_camera") -> np.ndarray:
     """A third-person view of the hand and object (for pictures and render_mode)."""
-    key = (width, height)
-    cache = hand.__dict__.setdefault("_scene_renderers", {})
-    if key not in cache:
-        cache[key] = mujoco.Renderer(hand.model, height=height, width=width)
-    r = cache[key]
-    opt = mujoco.MjvOption()
-    opt.geomgroup[:] = [1, 1, 1, 0, 0, 0]
-    opt.sitegroup[:] = 0
-    r.update_scene(hand.data, camera=camera, scene_option=opt)
+    r = _renderer(hand, (width, height), width, height)
+    r.update_scene(hand.data, camera=camera, scene_option=_VISUAL)
     return r.render()
