@@ -64,3 +64,19 @@ def test_lower_resolution_calibration_matches_its_frames():
         assert (hand.calibration.width, hand.calibration.height) == (320, 240)
         spec = hand.object_spec
         assert observe(frame.image, hand.calibration, spec.tag_id, spec.tag_size) is not None
+
+
+def test_a_hand_left_open_exits_without_egl_errors():
+    """A script that renders and never closes its hand exits quietly: its renderers are freed
+    before EGL is torn down, not by the garbage collector after it."""
+    import os
+    import subprocess
+    import sys
+
+    script = ("from sim.backend import SimHand\nfrom sim.camera import render_scene\n"
+              "h = SimHand(object='apple', seed=0)\nh.grab_frame()\nrender_scene(h)\n")
+    env = dict(os.environ, MUJOCO_GL="egl")
+    r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,
+                       env=env, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "EGL" not in r.stderr and "Exception ignored" not in r.stderr, r.stderr
