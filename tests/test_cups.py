@@ -110,3 +110,30 @@ def test_a_cup_spec_that_cannot_be_built_is_refused_by_name():
     cup = load_object("cup5")
     with pytest.raises(SpecError, match=r"cup5: an upright cup needs .*\(taper_deg 40,"):
         build_object(replace(cup, extras={**cup.extras, "taper_deg": 40}))
+
+
+@pytest.mark.parametrize("name", ["cup1", "cup3", "cup5"])
+def test_a_standing_cup_touches_its_support_with_its_bottom_only(name):
+    """Every wall box of an upright cup ends WALL_CLEARANCE above the outer bottom face, so
+    the table (or a larger cup's floor) meets the bottom disc alone: the wall corners that
+    reached below it made three quarters of a cup scene's step."""
+    import mujoco
+
+    from sim.model import WALL_CLEARANCE, build_scene, compile_scene, cup_dimensions
+    from vlr.spec import load_hand, load_object
+
+    spec = load_object(name)
+    m = compile_scene(build_scene(load_hand("modelo"), spec)).model
+    body = m.body("object/object").id
+    floor = cup_dimensions(spec)["floor_depth"]   # the bottom face, along +z_O
+    signs = np.array([[sx, sy, sz] for sx in (-1, 1) for sy in (-1, 1) for sz in (-1, 1)])
+    lowest = []
+    for g in range(m.ngeom):
+        if m.geom_bodyid[g] != body or not m.geom(g).name.split("/")[-1].startswith("wall"):
+            continue
+        rot = np.empty(9)
+        mujoco.mju_quat2Mat(rot, m.geom_quat[g])
+        corners = m.geom_pos[g] + (signs * m.geom_size[g]) @ rot.reshape(3, 3).T
+        lowest.append(corners[:, 2].max())
+    assert len(lowest) == 24
+    assert max(lowest) == pytest.approx(floor - WALL_CLEARANCE, abs=1e-9)
