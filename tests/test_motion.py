@@ -115,25 +115,6 @@ def test_rolling_gradient_and_hessian_match_reference(modelo, surface):
     check_derivatives(mm, st, u0, roll, e_rel=1e-10, hess_atol=2e-6)
 
 
-def test_per_joint_stops_match_reference_and_hold_the_proximal_joint_harder(modelo):
-    """`limit_stiffness` (proximal, distal): with every joint pushed past its open stop, the
-    kernel's energy and derivatives match the reference, and the proximal joints' stop
-    carries the first stiffness (the Hessian's diagonal gains it), the distal's the second."""
-    cfg = replace(PIN, limit_stiffness=(100.0, 17.0))
-    mm, st, u0 = grasp(modelo, config=cfg)
-    st.theta[0] = modelo.limits[..., 0] - 0.01
-    check_derivatives(mm, st, u0)
-    soft = MotionModel(modelo, OBJ, replace(cfg, limit_stiffness=17.0))
-    H = mm.evaluate(st, 0, u0)[2]
-    H_soft = soft.evaluate(st, 0, u0)[2]
-    np.testing.assert_allclose(np.diag(H - H_soft)[:6], [83.0, 0.0] * 3, atol=1e-9)
-    assert MotionConfig(limit_stiffness=[100, 17]).limit_stiffness == (100.0, 17.0)
-    with pytest.raises(ValueError, match="limit_stiffness"):
-        MotionConfig(limit_stiffness=(100.0, 17.0, 5.0))
-    with pytest.raises(ValueError, match="limit_stiffness"):
-        MotionConfig(limit_stiffness=(100.0, -1.0))
-
-
 def test_equilibrium_is_stationary_and_matches_scipy(modelo):
     # A soft contact penalty keeps the plain reference minimiser well conditioned.
     cfg = replace(PIN, contact_stiffness=1e4)

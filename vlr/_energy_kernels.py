@@ -28,11 +28,9 @@ N_TERMS = 7
 OK, NONFINITE, NO_CONVERGENCE, JUMP, INACTIVE = 0, 1, 2, 3, 4
 
 # Indices into the float parameter vector `prm`.
-# P_KLIM_FIRST is the stops' stiffness of each finger's first (proximal) joint, P_KLIM the
-# other joints'.
 (P_KC, P_KLIM, P_TOL_TH, P_TOL_P, P_MAX_DTH, P_MAX_DP, P_JUMP_TH, P_JUMP_P, P_MU0,
- P_KSPIN, P_SLIDE_FRICTION, P_SPIN_FRICTION, P_SPIN_EPS, P_KLIM_FIRST) = range(14)
-N_PRM = 14
+ P_KSPIN, P_SLIDE_FRICTION, P_SPIN_FRICTION, P_SPIN_EPS) = range(13)
+N_PRM = 13
 # Layout of a rolling frame (one per contact): local centre of curvature in O (3), contact
 # normal in the palm frame (3), the finger's summed joint angles (1), the object rotation
 # R_PO (9, row-major) at the start of the solve, the contact's normal force then (1) [N]
@@ -258,10 +256,9 @@ def _evaluate(th, seg, nrm, anc, rl, p, R, stiff, kt, u,
                 elif th[i, k] > hi[i, k]:
                     d = th[i, k] - hi[i, k]
                 if d != 0.0:
-                    kl = prm[P_KLIM_FIRST] if k == 0 else klim
-                    e += 0.5 * kl * d * d
-                    gA[i, k] += kl * d
-                    A[i, k, k] += kl
+                    e += 0.5 * klim * d * d
+                    gA[i, k] += klim * d
+                    A[i, k, k] += klim
         # Eq. 7, compliant: 1/2 k_t max(0, u - s)^2, s = sum r_k (theta_k - lo_k).
         if flags[TENDON] != 0:
             s = 0.0

@@ -107,9 +107,8 @@ class MotionConfig:
             off. The synthetic world calls a move a snap by the same test (`vlr.synthetic`).
         contact_stiffness: penalty k_c tying contacts to anchors [N/m]. 1e6 N/m leaves
             10 um of penetration at 10 N.
-        limit_stiffness: one-sided joint-limit penalty [N m/rad]: one for every joint, or
-            (proximal, distal): the first joint's and the others'. 100 lets a spring
-            preload of ~0.02 N m sink 0.01 degree into a stop.
+        limit_stiffness: one-sided joint-limit penalty [N m/rad]; 100 lets a spring preload
+            of ~0.02 N m sink 0.01 degree into a stop.
         gravity: gravity vector in the palm frame [m/s^2]; default palm up.
         max_iter: Newton iterations (including rejected LM trials) per solve.
         tol_theta: convergence: largest angle step [rad] (also used for the rotation step).
@@ -133,7 +132,7 @@ class MotionConfig:
     rolling_substeps: int = 4
     follow_substeps: int = 16
     contact_stiffness: float = 1e6
-    limit_stiffness: float | tuple[float, float] = 100.0
+    limit_stiffness: float = 100.0
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     max_iter: int = 30
     tol_theta: float = 2e-4
@@ -160,24 +159,13 @@ class MotionConfig:
         if not (isinstance(self.rolling_substeps, int) and self.rolling_substeps >= 1):
             raise ValueError(f"rolling_substeps {self.rolling_substeps!r} must be an "
                              "integer >= 1")
-        if isinstance(self.limit_stiffness, list | tuple):
-            if len(self.limit_stiffness) != 2:
-                raise ValueError(f"limit_stiffness {self.limit_stiffness!r} must be one "
-                                 "number or two (proximal, distal)")
-            object.__setattr__(self, "limit_stiffness",
-                               tuple(float(v) for v in self.limit_stiffness))
         for name in ("contact_stiffness", "limit_stiffness", "tol_theta", "tol_pos",
                      "max_step_theta", "max_step_pos", "jump_theta", "jump_pos", "mu0"):
             v = getattr(self, name)
-            if not all(math.isfinite(x) and x > 0 for x in np.atleast_1d(v)):
+            if not (math.isfinite(v) and v > 0):
                 raise ValueError(f"{name} {v!r} must be finite and > 0")
         if not (isinstance(self.max_iter, int) and self.max_iter >= 1):
             raise ValueError(f"max_iter {self.max_iter!r} must be an integer >= 1")
-
-    def stop_stiffness(self, n_joints: int) -> np.ndarray:
-        """The joint stops' stiffness per joint of a finger, proximal first [N m/rad]."""
-        first, rest = np.broadcast_to(np.asarray(self.limit_stiffness, dtype=float), 2)
-        return np.r_[first, np.full(n_joints - 1, rest)]
 
     def flags(self) -> np.ndarray:
         out = np.zeros(kern.N_TERMS, dtype=np.int64)
@@ -192,7 +180,7 @@ class MotionConfig:
         friction = friction or PadFriction()
         prm = np.zeros(kern.N_PRM)
         prm[kern.P_KC] = self.contact_stiffness
-        prm[kern.P_KLIM_FIRST], prm[kern.P_KLIM] = self.stop_stiffness(2)
+        prm[kern.P_KLIM] = self.limit_stiffness
         prm[kern.P_TOL_TH] = self.tol_theta
         prm[kern.P_TOL_P] = self.tol_pos
         prm[kern.P_MAX_DTH] = self.max_step_theta
@@ -758,7 +746,7 @@ def reference_energy(motion: MotionModel, state: ParticleState, q: int, u: np.nd
         e += 0.5 * np.sum(state.stiffness[q] * (theta - m.rest) ** 2)
     if "limits" in cfg.terms:
         over = np.maximum(0.0, lim[..., 0] - theta) + np.maximum(0.0, theta - lim[..., 1])
-        e += 0.5 * np.sum(cfg.stop_stiffness(m.n_joints) * over**2)
+        e += 0.5 * cfg.limit_stiffness * np.sum(over**2)
     if "tendon" in cfg.terms:
         slack = np.maximum(0.0, np.asarray(u) - m.tendon_takeup(theta))
         e += 0.5 * np.sum(state.tendon[q] * slack**2)

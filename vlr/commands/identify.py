@@ -235,9 +235,8 @@ def format_table(result, summary: dict, model) -> str:
             noise = s.get("world.options", {}).get("tension_noise_n") or 0.0
             lines.append(f"tensions weighed at {s['filter.observation.sigma_tension_n']:g} N"
                          + (f" (the sim's readings {noise:g} N noisy)" if noise else ""))
-        stops = " / ".join(f"{k:g}" for k in np.atleast_1d(s["filter.motion.limit_stiffness"]))
         lines.append(f"contacts: {'rolling' if s['filter.motion.rolling'] else 'pinned'}; "
-                     f"joint stops {stops} N m/rad; contact "
+                     f"joint stops {s['filter.motion.limit_stiffness']:g} N m/rad; contact "
                      f"prior {s['filter.contact_prior']}, "
                      f"{s['filter.contact_spread_deg']:.1f} deg spread")
     return "\n".join(lines)
