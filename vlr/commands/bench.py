@@ -113,10 +113,12 @@ def bench_one(n_particles: int, repeats: int, seed: int = 0, contacts: str = "ro
     return {k: float(np.median([r[k] for r in rows])) for k in rows[0]}
 
 
-def term_costs(n_particles: int, seed: int = 0, repeats: int = 3) -> dict[str, float]:
+def term_costs(n_particles: int, seed: int = 0, repeats: int = 5) -> dict[str, float]:
     """Microseconds per particle of one energy evaluation (energy, gradient and Hessian) with
     each term alone, and with all of the filter's terms, on n_particles copies of the
-    bench's particles (so that the kernel's start-up does not count)."""
+    bench's particles (so that the kernel's start-up does not count). The least of `repeats`
+    timed calls, as `timeit` takes it: a call of a few milliseconds varies by half on this
+    kind of machine, and the noise only adds."""
     from vlr import _energy_kernels as kern
     from vlr.motion import TERMS
 
@@ -134,13 +136,15 @@ def term_costs(n_particles: int, seed: int = 0, repeats: int = 3) -> dict[str, f
                 flags[kern.CONTACTS] = 1
         energy = np.empty(st.n)
         times = []
-        for _ in range(repeats):
+        # One untimed call first: each term's first calls ran at up to twice its cost (the
+        # threads' and the caches' warm-up), which put the rolling term alone above all terms.
+        for _ in range(repeats + 1):
             t = time.perf_counter()
             kern.evaluate_batch(st.theta, st.segments, st.normals, st.anchors, roll, st.pos,
                                 st.rot, st.stiffness, st.tendon, pf.command, *shared, flags,
                                 m._prm, energy)
             times.append(time.perf_counter() - t)
-        out[name] = float(np.median(times)) / st.n * 1e6
+        out[name] = float(np.min(times[1:])) / st.n * 1e6
     return out
 
 
