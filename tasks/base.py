@@ -112,7 +112,7 @@ class HandTaskEnv(gym.Env):
 
     def __init__(self, backend: str = "sim", render_mode: str | None = None, *,
                  identify: bool = True, filter_updates: bool = True,
-                 particles: int = 5000, identify_iterations: int = 15,
+                 particles: int = 3000, identify_iterations: int = 10,
                  max_step: float = 0.4e-3,
                  command_band: tuple[float, float] = (0.25e-3, 0.4e-3),
                  squeeze: float = 0.0,

@@ -133,6 +133,8 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
            (["cups", "--option", "level_about=rim"], "level_about"),
            (["cups", "--alpha", "nan"], "--alpha"),
            (["cups", "--jacobian-particles", "0"], "--jacobian-particles"),
+           (["maze", "--particles", "5"], "--particles 5"),
+           (["maze", "--identify-iterations", "-1"], "--identify-iterations -1"),
            (["cups", "--controller", "gain"], "KEY=VALUE"),
            (["cups", "--controller", "speed=1"], "not a controller setting"),
            (["cups", "--controller", "rows='diagonal'"], "rows"),

@@ -58,9 +58,11 @@ def register(sub: argparse._SubParsersAction) -> None:
                    "write OUT/summary.md and OUT/summary.csv (mean and SD over seeds)")
     p.add_argument("--workers", type=int, default=1,
                    help="with --seeds: seeds run at once, one process each (default 1)")
-    p.add_argument("--particles", type=int, default=5000,
-                   help="particles of the identification in reset")
-    p.add_argument("--identify-iterations", type=int, default=15)
+    p.add_argument("--particles", type=int,
+                   help="particles of the identification in reset (default: the task's, "
+                   "3000)")
+    p.add_argument("--identify-iterations", type=int,
+                   help="its exploratory moves (default: the task's, 10)")
     p.add_argument("--method", choices=("dls", "transpose"),
                    help="control step (default: the task's)")
     p.add_argument("--no-secant", action="store_true",
@@ -162,9 +164,9 @@ def _checked(args: argparse.Namespace) -> tuple[str, str, dict, dict, dict]:
         raise UserError(f"--backend {args.backend!r}: use sim or hardware")
     if args.backend == "hardware" and not args.config:
         raise UserError("--backend hardware needs --config FILE")
-    if args.particles < 10:
+    if args.particles is not None and args.particles < 10:
         raise UserError(f"--particles {args.particles} must be >= 10")
-    if args.identify_iterations < 0:
+    if args.identify_iterations is not None and args.identify_iterations < 0:
         raise UserError(f"--identify-iterations {args.identify_iterations} must be >= 0")
     if args.seed < 0:
         raise UserError(f"--seed {args.seed} must be >= 0")
@@ -172,8 +174,9 @@ def _checked(args: argparse.Namespace) -> tuple[str, str, dict, dict, dict]:
     env_id = found[args.name].load()      # importing the tasks package registers the envs
     if env_id not in gym.registry:
         raise UserError(f"task {args.name!r} ({env_id}) is not available in this version")
-    kwargs = {"backend": args.backend, "particles": args.particles,
-              "identify_iterations": args.identify_iterations, **options}
+    given = {"particles": args.particles, "identify_iterations": args.identify_iterations}
+    kwargs = {"backend": args.backend, **{k: v for k, v in given.items() if v is not None},
+              **options}
     if args.set:
         from vlr.settings import parse_assignment
 
