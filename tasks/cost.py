@@ -4,6 +4,7 @@ same run (docs/TASKS.md, "Cost").
 
     python -m tasks.cost                       # every id, seeds 0-2, 3 steps per reset
     python -m tasks.cost --ids vlr/Handwriting-v1 --seeds 5
+    python -m tasks.cost --particles 5000 --identify-iterations 15   # another identification
 """
 
 from __future__ import annotations
@@ -44,6 +45,9 @@ def main(argv: list[str] | None = None) -> int:
                    help="registered ids (default: every one)")
     p.add_argument("--seeds", type=int, default=3, help="resets per id (seeds 0..N-1)")
     p.add_argument("--steps", type=int, default=3, help="steps timed after each reset")
+    p.add_argument("--particles", type=int, help="the identification's (default: the task's)")
+    p.add_argument("--identify-iterations", type=int,
+                   help="its exploratory moves (default: the task's)")
     args = p.parse_args(argv)
     unknown = [i for i in args.ids if i not in tasks.ENVIRONMENTS]
     if unknown:
@@ -54,13 +58,20 @@ def main(argv: list[str] | None = None) -> int:
         print(f"tasks.cost: --seeds {args.seeds} must be >= 1 and --steps {args.steps} >= 0",
               file=sys.stderr)
         return 2
+    if (args.particles is not None and args.particles < 10) or (
+            args.identify_iterations is not None and args.identify_iterations < 0):
+        print(f"tasks.cost: --particles {args.particles} must be >= 10 and "
+              f"--identify-iterations {args.identify_iterations} >= 0", file=sys.stderr)
+        return 2
+    given = {"particles": args.particles, "identify_iterations": args.identify_iterations}
+    make = {k: v for k, v in given.items() if v is not None}
     print(f"yardstick (vlr bench, 60,000 particles): {yardstick(60000):.3f} s")
     print(f"{'id':24s} {'identify':>8s} {'reset s':>8s} {'step s':>8s}")
     for env_id in args.ids:
         for identify in (True, False):
             if not identify and env_id == tasks.CUP_STACKING:
                 continue   # cup stacking needs the identification (tasks/cups.py)
-            reset, step = env_cost(env_id, args.seeds, args.steps, identify=identify)
+            reset, step = env_cost(env_id, args.seeds, args.steps, identify=identify, **make)
             print(f"{env_id:24s} {str(identify):>8s} {reset:8.2f} {step:8.3f}", flush=True)
     return 0
 

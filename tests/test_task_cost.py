@@ -17,3 +17,5 @@ def test_bad_input_is_one_line(capsys):
     assert err.count("\n") == 1 and "'vlr/Nope-v0'" in err
     assert main(["--seeds", "0"]) == 2
     assert "--seeds 0" in capsys.readouterr().err
+    assert main(["--particles", "5"]) == 2
+    assert "--particles 5" in capsys.readouterr().err

@@ -59,10 +59,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--workers", type=int, default=1,
                    help="with --seeds: seeds run at once, one process each (default 1)")
     p.add_argument("--particles", type=int,
-                   help="particles of the identification in reset (default: the task's, "
-                   "3000)")
+                   help="particles of the identification in reset (default: the task's)")
     p.add_argument("--identify-iterations", type=int,
-                   help="its exploratory moves (default: the task's, 10)")
+                   help="its exploratory moves (default: the task's)")
     p.add_argument("--method", choices=("dls", "transpose"),
                    help="control step (default: the task's)")
     p.add_argument("--no-secant", action="store_true",
