@@ -359,7 +359,7 @@ def run_seed(job: SeedRun) -> dict:
             bar.close()
         task = env.unwrapped
         result = {"task": job.name, "env": job.env_id, "backend": job.kwargs["backend"],
-                  "seed": job.seed, "particles": job.kwargs["particles"],
+                  "seed": job.seed, "particles": task.particles,
                   "options": job.options,
                   "policy": job.policy or "baseline",
                   **({"controller": dataclasses.asdict(policy.config)}
