@@ -21,7 +21,10 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["atomic_path", "write_text_atomic", "write_json_atomic", "read_line"]
+from vlr.errors import UserError
+
+__all__ = ["atomic_path", "write_text_atomic", "write_json_atomic", "read_line",
+           "check_output_dir", "check_output_file"]
 
 _STDIN_PENDING = bytearray()   # bytes read from stdin past the last line returned
 
@@ -50,6 +53,53 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
         if os.path.exists(tmp):
             os.unlink(tmp)
         raise
+
+
+def _dir_problem(path: Path) -> str | None:
+    """Why `path` cannot be used as a folder to write in, or None: it is created if
+    missing and a probe file written and removed in it, which finds every way it can fail
+    (a file there or above it, no permission, a read-only filesystem) as the run would."""
+    if path.exists() and not path.is_dir():
+        return "is a file, not a folder"
+    for parent in path.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                return f"{parent} is a file, not a folder"
+            break
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(prefix=".probe.tmp-", dir=path)
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as e:
+        return f"cannot write there ({e.strerror or e})"
+    return None
+
+
+def check_output_dir(path: str | Path, flag: str = "--out") -> Path:
+    """`path` as a folder the run can write to, created if missing; a UserError naming
+    `flag` and the path otherwise. Called before any computation, so that a bad `--out` is
+    one line at the start, not a traceback after the whole run."""
+    path = Path(path)
+    problem = _dir_problem(path)
+    if problem:
+        raise UserError(f"{flag} {path}: {problem}")
+    return path
+
+
+def check_output_file(path: str | Path, flag: str) -> Path:
+    """`path` as a file the run can write at its end: not a folder, and its folder
+    writable (created if missing); a UserError naming `flag` and the path otherwise."""
+    path = Path(path)
+    if path.is_dir():
+        problem: str | None = "is a folder, not a file"
+    elif path.parent.exists() and not path.parent.is_dir():
+        problem = f"{path.parent} is a file, not a folder"
+    else:
+        problem = _dir_problem(path.parent)
+    if problem:
+        raise UserError(f"{flag} {path}: {problem}")
+    return path
 
 
 def write_text_atomic(path: str | Path, text: str) -> Path:
