@@ -413,3 +413,29 @@ grid: {{filter.estimator: [pf, ukf]}}
         "cases: [{name: c, filter.estimator: ukf, filter.unknowns: [curvature]}]"))
     with pytest.raises(UserError, match="case 'c': filter.unknowns 'curvature'"):
         expand(load_sweep(path))
+
+
+def test_a_reversed_seed_range_says_it_is_reversed():
+    with pytest.raises(UserError, match=r"range '4-0' is reversed; write 0-4"):
+        parse_seeds("4-0")
+    with pytest.raises(UserError, match=r"range '9-7' is reversed"):
+        parse_seeds("0,9-7")
+
+
+def test_a_huge_seed_range_fails_at_once_naming_the_limit(tmp_path, capsys):
+    import time
+
+    from vlr.sweep import MAX_SEEDS
+
+    t0 = time.perf_counter()
+    with pytest.raises(UserError, match=f"more than the limit of {MAX_SEEDS:,}"):
+        parse_seeds("0-100000000")
+    with pytest.raises(UserError, match="limit"):
+        parse_seeds(list(range(MAX_SEEDS + 1)))
+    assert len(parse_seeds(f"0-{MAX_SEEDS - 1}")) == MAX_SEEDS
+    assert main(["sweep", "--backend", "synthetic", "--seeds", "0-100000000",
+                 "--out", str(tmp_path / "o"), "--quiet"]) == 2
+    assert time.perf_counter() - t0 < 5
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "'0-100000000'" in err[0] and "10,000" in err[0]
+    assert not (tmp_path / "o").exists()

@@ -92,8 +92,15 @@ class SweepSpec:
     grid: dict[str, list[Any]]
 
 
+# More seeds than this in one list or range is a typo ("0-100000000"), not a plan.
+MAX_SEEDS = 10_000
+
+
 def parse_seeds(value: Any) -> tuple[int, ...]:
-    """Seeds from a list, an int, or a string like "0-4" or "0,3,7"."""
+    """Seeds from a list, an int, or a string like "0-4" or "0,3,7"; at most MAX_SEEDS.
+
+    A range's size is checked before the range is built: "0-100000000" would otherwise
+    become a list of a hundred million seeds, then as many trials to expand."""
     usage = f"seeds {value!r}: use e.g. 0-4 or 0,1,2"
     if isinstance(value, bool):
         raise UserError(usage)
@@ -103,15 +110,27 @@ def parse_seeds(value: Any) -> tuple[int, ...]:
         out = list(value)
     elif isinstance(value, str):
         out = []
+        count = 0
         for part in value.split(","):
             part = part.strip()
             lo, sep, hi = part.partition("-")
             try:
-                out += list(range(int(lo), int(hi) + 1)) if sep else [int(part)]
+                first, last = (int(lo), int(hi)) if sep else (int(part), int(part))
             except ValueError:
                 raise UserError(usage) from None
+            if last < first:
+                raise UserError(f"seeds {value!r}: the range {part!r} is reversed; write "
+                                f"{last}-{first}")
+            count += last - first + 1
+            if count <= MAX_SEEDS:
+                out += range(first, last + 1)
+        if count > MAX_SEEDS:
+            raise UserError(f"seeds {value!r}: {count:,} seeds, more than the limit of "
+                            f"{MAX_SEEDS:,}")
     else:
         raise UserError(usage)
+    if len(out) > MAX_SEEDS:
+        raise UserError(f"seeds: {len(out):,} seeds, more than the limit of {MAX_SEEDS:,}")
     # int("3") is fine; 1.5 or true is not a seed (int() would quietly make them 1).
     if not all((isinstance(s, int) and not isinstance(s, bool)) or isinstance(s, str)
                for s in out):
