@@ -93,6 +93,7 @@ def table_rows(rep: dict) -> list[dict]:
 def _settings(args: argparse.Namespace) -> GapSettings:
     """The model and ramp of the sim's identification, with the --set overrides."""
     from sim.backend import SimWorldOptions
+    from vlr import smoke
     from vlr.settings import load_settings, parse_assignment
 
     sets = dict(parse_assignment(t) for t in args.set)
@@ -102,7 +103,8 @@ def _settings(args: argparse.Namespace) -> GapSettings:
                         "world.options.ramp_time")
     tree = load_settings({"world.backend": "sim"}, sets)
     ramp = tree.world.options.get("ramp_time", SimWorldOptions.ramp_time)
-    return GapSettings(actions=args.actions, drift_actions=args.drift_actions,
+    return GapSettings(actions=smoke.cap(args.actions, smoke.ACTIONS),
+                       drift_actions=smoke.cap(args.drift_actions, smoke.ACTIONS),
                        motion=tree.filter.motion, start=args.start, ramp_time=ramp,
                        fit=args.fit, fit_range=args.fit_range, fit_points=args.fit_points,
                        fit_turn_deg=args.fit_turn_deg)

@@ -43,6 +43,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from vlr import smoke
 from vlr.controller import ControllerConfig, rotation_log
 from vlr.errors import UserError
 from vlr.hand import GraspError
@@ -362,7 +363,9 @@ class HandTaskEnv(gym.Env):
         terminated = bool(self._task_step() or self.grasp_lost)
         obs, info = self._get_obs(), self._info()
         reward = float(self.compute_reward(obs["achieved_goal"], obs["desired_goal"], info))
-        return obs, reward, terminated, False, info
+        # VLR_SMOKE (vlr/smoke.py): a smoke test's episode, a few moves of the default one.
+        truncated = smoke.active() and len(self.moves) >= smoke.TASK_MOVES
+        return obs, reward, terminated, truncated, info
 
     def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray,
                        info: Any = None) -> np.ndarray | float:

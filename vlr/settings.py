@@ -95,7 +95,9 @@ class Settings:
 
 def load_settings(*layers: Mapping[str, Any] | None, backend_defaults: bool = True) -> Settings:
     """The settings tree (module docstring): the dataclass defaults, then the backend's
-    defaults (unless `backend_defaults` is False), then each layer in order."""
+    defaults (unless `backend_defaults` is False), then each layer in order, then the caps
+    of `VLR_SMOKE` when it is set (`vlr.smoke`)."""
+    from vlr import smoke
     from vlr.backends import get_backend
 
     layers = tuple(layer for layer in layers if layer)
@@ -108,6 +110,7 @@ def load_settings(*layers: Mapping[str, Any] | None, backend_defaults: bool = Tr
         settings = apply_layer(settings, backend.defaults, f"the {name} backend's default ")
     for layer in layers:
         settings = apply_layer(settings, layer)
+    settings = apply_layer(settings, smoke.settings_layer(settings.flat()), "VLR_SMOKE's ")
     return backend.check(settings)
 
 

@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from vlr import smoke
 from vlr.errors import UserError
 from vlr.executors import run_local, run_ray
 from vlr.io import write_json_atomic, write_text_atomic
@@ -143,7 +144,7 @@ def parse_seeds(value: Any) -> tuple[int, ...]:
         raise UserError("a sweep needs at least one seed")
     if min(seeds) < 0:
         raise UserError(f"{usage} (seeds are >= 0)")
-    return seeds
+    return tuple(smoke.first(seeds))
 
 
 def load_sweep(path: str | Path, out: str | Path | None = None) -> SweepSpec:
@@ -206,7 +207,7 @@ def expand(spec: SweepSpec) -> list[Trial]:
                             "of them other settings or another name")
         seen[t.id] = t.case
     _check_names(trials)
-    return trials
+    return smoke.first(trials, smoke.TRIALS)
 
 
 def _check_names(trials: list[Trial]) -> None:

@@ -162,6 +162,7 @@ def run(args: argparse.Namespace) -> int:
     if args.threads is not None and not 1 <= args.threads <= cores:
         raise UserError(f"--threads {args.threads} must be 1..{cores} (the cores numba has)")
     numba.set_num_threads(args.threads or cores)
+    from vlr import smoke
     from vlr._energy_kernels import solve_path_batch  # noqa: F401  (compile/load the cache)
     from vlr.io import write_json_atomic
 
@@ -171,8 +172,11 @@ def run(args: argparse.Namespace) -> int:
           "medians over the iterations")
     print(f"{'particles':>10} " + " ".join(f"{k:>11}" for k in (*PHASES, "total"))
           + f" {'yardstick':>10} {'ratio':>6}   Newton iterations (action, settle)")
-    for n in args.particles:
-        med = bench_one(n, args.repeats, args.seed, args.contacts, args.profile)
+    # VLR_SMOKE (vlr/smoke.py): the same run at a smoke test's sizes.
+    counts = dict.fromkeys(smoke.cap(n, smoke.BENCH_PARTICLES) for n in args.particles)
+    repeats = smoke.cap(args.repeats, 1)
+    for n in counts:
+        med = bench_one(n, repeats, args.seed, args.contacts, args.profile)
         med["yardstick"] = yardstick(n, seed=args.seed)
         med["ratio"] = med["total"] / med["yardstick"]
         results[n] = med
