@@ -11,6 +11,7 @@ install:
 	$(PY) -m venv $(VENV)
 	$(BIN)/pip install -q --upgrade pip
 	$(BIN)/pip install -q -c constraints.txt -e '.[all]'
+	$(BIN)/python -m vlr.precompile   # numba's kernels compiled once, not in the first run
 
 # The main job on the embedded defaults, on a budget of seconds: the sim identifies its grasp
 # of the apple and prints the estimates beside the truth, then the commands to try next.

@@ -19,8 +19,9 @@ import numpy as np
 
 from vlr.errors import UserError
 
-# Small enough for seconds on two cores (about 15 s here, 1 s per filter iteration), large
-# enough that the apple's proximal joints land within a degree or so of the truth.
+# Small enough for seconds on two cores (about 6 s here once `vlr.precompile` has compiled
+# the kernels), large enough that the apple's proximal joints land within a degree or so of
+# the truth.
 DEMO_PARTICLES = 6000
 DEMO_ACTIONS = 10
 
