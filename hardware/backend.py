@@ -19,7 +19,15 @@ Safety, in order of defence:
   hardware error one last time, switches torque off again (a broadcast first, so a motor
   whose replies are lost still hears it) and is called by the context manager and by
   `atexit`. SIGINT, SIGTERM and SIGHUP raise `vlr.errors.Interrupted` (the CLI's one
-  "interrupted" line); later signals are ignored while the run shuts down.
+  "interrupted" line); later signals are ignored while the run shuts down. `close()`
+  switches torque off even when its last check fails on a serial error.
+* Every motor's Bus Watchdog (98) is armed whenever its torque goes on (bus.watchdog_ms):
+  if this process dies (SIGKILL, out of memory) or the cable is pulled, the motors stop
+  within that time. The control loop's packets feed it, and a keep-alive thread reads the
+  motors whenever the bus has been idle for a quarter of it (a filter update, a prompt).
+* The camera: camera.max_missing_frames reads in a row without a frame stop the run with
+  torque off (`CameraError` naming the camera), rather than taking a blind camera for a
+  held grasp and updating on predictions alone.
 """
 
 from __future__ import annotations
@@ -37,12 +45,13 @@ import numpy as np
 
 from hardware.bus import HardwareError, MotorBus
 from hardware.calibration import find_zeros
-from hardware.camera import FakeCamera, FrameSource, OpenCVCamera
+from hardware.camera import CameraError, FakeCamera, FrameSource, OpenCVCamera
 from hardware.config import EMULATOR_PORT, HardwareConfig, load_config
 from hardware.control_table import (
     CURRENT_UNIT_MA,
     MODEL_NUMBERS,
     VELOCITY_UNIT_RPM,
+    WATCHDOG_UNIT_MS,
     OperatingMode,
     Reg,
 )
@@ -97,7 +106,9 @@ class HardwareHand:
         self._old_signals: dict[int, Any] = {}
         self.finger_ids = [f.id for f in config.fingers]
         self.bus = MotorBus(port or config.bus.port, config.bus.baud, labels=config.labels,
-                            latency_ms=config.bus.latency_ms, retries=config.bus.retries)
+                            latency_ms=config.bus.latency_ms, retries=config.bus.retries,
+                            watchdog=config.bus.watchdog)
+        self._missing = 0  # camera reads in a row without a frame
         self.tendons: TendonMap | None = None
         self._u = np.zeros(len(self.finger_ids))  # the commands sent (the goals)
         self._reached: np.ndarray | None = None  # the commands the motors reached
@@ -170,24 +181,54 @@ class HardwareHand:
                            message=message, tensions=self._tensions())
 
     def grab_frame(self) -> Frame | None:
-        image = self.camera.read()
+        """The camera's newest frame, or None if it delivered none this time;
+        camera.max_missing_frames in a row stop the run (`_read_image`)."""
+        image = self._read_image()
         if image is None:
             return None
         return Frame(image=image, stamp=time.monotonic())
 
+    def _read_image(self) -> np.ndarray | None:
+        """One camera read, counted: a frame resets the count of reads in a row without
+        one; reaching camera.max_missing_frames switches torque off and raises
+        `CameraError`. A single dropped frame is not an error (the step is then a
+        prediction), a camera that stopped is."""
+        image = self.camera.read()
+        if image is not None:
+            self._missing = 0
+            return image
+        self._missing += 1
+        limit = self.config.camera.max_missing_frames
+        if self._missing >= limit:
+            name = getattr(self.camera, "name", type(self.camera).__name__)
+            with self._guarded():
+                raise CameraError(
+                    f"{name} delivered no frame in {self._missing} reads in a row "
+                    f"(camera.max_missing_frames = {limit}): the run stopped with torque off; "
+                    "check the camera's cable and that no other program holds it")
+        return None
+
     def close(self) -> None:
         """Check every motor for a hardware error one last time (a fault after the last move
         raises `MotorFaultError` once everything is released, so no run ends as if it had
-        succeeded), then `_release`. Safe to call more than once."""
+        succeeded), then `_release`, whatever the check raised (a serial error from a
+        pulled cable included). Safe to call more than once."""
         if self._closed:
             return
         fault: HardwareError | None = None
-        if self.bus.connected and not self._stopped:
-            try:
-                self.bus.sync_read_one(Reg.HARDWARE_ERROR_STATUS, self.config.ids)
-            except HardwareError as exc:
-                fault = exc
-        self._release()
+        try:
+            if self.bus.connected and not self._stopped:
+                try:
+                    self.bus.sync_read_one(Reg.HARDWARE_ERROR_STATUS, self.config.ids)
+                except HardwareError as exc:
+                    fault = exc
+                except OSError as exc:  # pyserial's SerialException is one
+                    fault = HardwareError(
+                        f"the motor bus on {self.bus.port_name} failed during the last check "
+                        f"of the motors ({type(exc).__name__}: {exc}); torque off was sent: "
+                        "check the cable")
+        finally:
+            self._release()
         if fault is not None:
             raise fault
 
@@ -229,7 +270,11 @@ class HardwareHand:
                 self.log(f"{self.bus.label(dxl_id)} is model number {model}, not a known "
                          "X-series motor; continuing with the X-series control table")
         # (A motor in a hardware error state fails its ping with the decoded bits.)
-        # EEPROM settings need torque off.
+        if cfg.bus.watchdog:
+            # Fed from here on, so that no pause of this living process trips it.
+            self.bus.start_keepalive(cfg.ids, cfg.bus.watchdog_ms / 1000.0 / 4.0)
+        # EEPROM settings need torque off (which also clears a watchdog that expired when
+        # an earlier run died: its goals would be read-only).
         self.bus.set_torque(cfg.ids, False)
         m = cfg.motion
         need_probe = any(f.zero is None for f in cfg.fingers)
@@ -269,7 +314,7 @@ class HardwareHand:
             self.bus.write(Reg.PROFILE_VELOCITY, s.id,
                            int(round(m.profile_velocity_rpm / VELOCITY_UNIT_RPM)))
             # Goal after torque on: enabling torque may reset the goal to the present position.
-            self.bus.write(Reg.TORQUE_ENABLE, s.id, 1)
+            self.bus.set_torque([s.id], True)
             self.bus.write(Reg.GOAL_POSITION, s.id, s.position)
         present = self.bus.sync_read_one(Reg.PRESENT_POSITION, self.finger_ids)
         self._u = self.tendons.commands([present[i] for i in self.finger_ids])
@@ -343,10 +388,17 @@ class HardwareHand:
                          f"the {goal} sent (a lost write): sending it again")
                 bus.write(Reg.GOAL_POSITION, dxl_id, goal)
         torque = bus.sync_read_one(Reg.TORQUE_ENABLE, self.config.ids)
-        off = [bus.label(i) for i, on in torque.items() if not on]
+        off = [i for i, on in torque.items() if not on]
+        expired = [i for i in off if bus.watchdog_expired(i)]
+        if expired:
+            raise HardwareError(
+                f"{', '.join(bus.label(i) for i in expired)} stopped: its bus watchdog expired "
+                f"(no packet for {bus.watchdog * WATCHDOG_UNIT_MS} ms, bus.watchdog_ms; "
+                "a stalled host or serial line?)")
         if off:
-            raise HardwareError(f"{', '.join(off)} switched torque off without a hardware "
-                                "error (a reboot or a supply dip?): check the 12 V supply")
+            raise HardwareError(f"{', '.join(bus.label(i) for i in off)} switched torque off "
+                                "without a hardware error (a reboot or a supply dip?): check "
+                                "the 12 V supply")
         return settled, state
 
     def _commands_at(self, state: MotionState) -> np.ndarray:
@@ -401,9 +453,9 @@ class HardwareHand:
         """Whether the object is held, as far as the palm camera can tell."""
         if not self.config.grasp.check_tag:
             return True, ""
-        image = self.camera.read()
+        image = self._read_image()
         if image is None:
-            return True, ""  # no frame: unknown, so not a failure
+            return True, ""  # a dropped frame: unknown (a camera that stopped raises)
         from vlr.perception import detect_tags, to_gray
 
         if any(d.tag_id == self._object.tag_id for d in detect_tags(to_gray(image))):
@@ -486,11 +538,12 @@ def open_hand(*, config: str, **ignored: Any) -> HardwareHand:
 
 def _camera(cfg: HardwareConfig, calibration: CameraCalibration, plant: Any) -> FrameSource:
     if cfg.camera.fake == "blank":
-        return FakeCamera(calibration.width, calibration.height)
+        return FakeCamera(calibration.width, calibration.height, name="camera.fake 'blank'")
     if cfg.camera.fake == "sim":
         if plant is None or not hasattr(plant, "render"):
             raise HardwareError("camera.fake 'sim' needs bus.port 'emulator' with "
                                 "emulator.plant 'sim' (frames come from the simulated hand)")
-        return FakeCamera(calibration.width, calibration.height, source=plant.render)
+        return FakeCamera(calibration.width, calibration.height, source=plant.render,
+                          name="camera.fake 'sim'")
     assert cfg.camera.index is not None
     return OpenCVCamera(cfg.camera.index, calibration.width, calibration.height)

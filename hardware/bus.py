@@ -24,15 +24,24 @@ Sharp edges of the SDK this class works around (docs: shared/docs/DYNAMIXEL.md):
   the motor: such writes are refused here.
 * A KeyboardInterrupt inside a transaction leaves the SDK's `is_using` flag set, after which
   every transaction fails as "port busy": `recover()` clears it.
+
+The Bus Watchdog (98): with `watchdog` set, `set_torque(..., True)` arms it on each motor
+before its torque goes on, and `set_torque(..., False)` and `torque_off_everywhere` disarm it
+before torque goes off. Every transaction feeds it; `start_keepalive` adds a thread that
+reads the motors whenever the bus has been idle for a while (the filter's update, a prompt),
+so that only a dead process, a hung serial line or a pulled cable lets it expire. Every
+transaction holds `lock`, so that thread and the caller's never interleave on the wire.
 """
 
 from __future__ import annotations
 
 import errno
 import fcntl
+import functools
 import glob
 import logging
 import os
+import threading
 import time
 from collections.abc import Iterable, Mapping, Sequence
 
@@ -40,6 +49,8 @@ from hardware.control_table import (
     ALERT_BIT,
     MODEL_NUMBERS,
     SDK_BAUD_RATES,
+    WATCHDOG_EXPIRED,
+    WATCHDOG_MAX,
     Reg,
     describe_hardware_error,
     describe_status_error,
@@ -124,6 +135,18 @@ class _PortHandler(PortHandler):
                                + 2.0)
 
 
+def _locked(method):
+    """Run a bus method holding the bus's lock and stamp when the bus was last used."""
+    @functools.wraps(method)
+    def wrapper(self, *args, **kwargs):
+        with self.lock:
+            try:
+                return method(self, *args, **kwargs)
+            finally:
+                self.last_used = time.monotonic()
+    return wrapper
+
+
 def serial_ports() -> list[str]:
     """Serial ports that look like a U2D2 or another USB adapter."""
     found = []
@@ -141,10 +164,20 @@ class MotorBus:
         labels: names for messages, e.g. {1: "thumb"}.
         latency_ms: USB latency budget in each packet timeout [ms] (see `_PortHandler`).
         retries: extra tries of a failed transaction before raising `CommError`.
+        watchdog: the Bus Watchdog (98) armed on each motor while its torque is on [units of
+            20 ms, 1..127]; 0 leaves register 98 alone (motor firmware before v38 has none).
     """
 
     def __init__(self, port: str, baud: int, *, labels: Mapping[int, str] | None = None,
-                 latency_ms: float = 16.0, retries: int = 2) -> None:
+                 latency_ms: float = 16.0, retries: int = 2, watchdog: int = 0) -> None:
+        if not 0 <= watchdog <= WATCHDOG_MAX:
+            raise ValueError(f"bus watchdog {watchdog} must be in [0, {WATCHDOG_MAX}] "
+                             "(units of 20 ms)")
+        self.watchdog = watchdog
+        self.lock = threading.RLock()
+        self.last_used = time.monotonic()
+        self._keepalive: threading.Thread | None = None
+        self._keepalive_stop = threading.Event()
         self.port_name = port
         self.baud = baud
         self.labels = dict(labels or {})
@@ -193,7 +226,9 @@ class MotorBus:
         return f"cannot open serial port {self.port_name}: {exc}"
 
     def close(self) -> None:
-        """Close the port (releases the lock). Safe to call twice."""
+        """Stop the keep-alive thread and close the port (releases the lock). Safe to call
+        twice."""
+        self.stop_keepalive()
         if self.port is not None:
             self.port.is_using = False
             try:
@@ -205,6 +240,7 @@ class MotorBus:
     def connected(self) -> bool:
         return self.port is not None
 
+    @_locked
     def recover(self) -> None:
         """Make the port usable after a failed or interrupted transaction: clear the SDK's
         busy flag and drop late replies (waiting a little so they have arrived)."""
@@ -326,6 +362,7 @@ class MotorBus:
                                    f"{describe_status_error(error)}")
 
     # ----------------------------------------------------------------- transactions
+    @_locked
     def ping(self, dxl_id: int) -> int:
         """The model number of `dxl_id`; `CommError` naming the id if it does not answer."""
         model, error = self._retry("ping", dxl_id, lambda: self._ping_once(dxl_id))
@@ -335,6 +372,7 @@ class MotorBus:
     def model_name(self, model: int) -> str:
         return MODEL_NUMBERS.get(model, f"model {model}")
 
+    @_locked
     def read_raw(self, address: int, length: int, dxl_id: int) -> tuple[bytes, int]:
         """(data, status error byte) of a READ, with retries; the error byte is NOT checked."""
         params = (address & 0xFF, address >> 8, length & 0xFF, length >> 8)
@@ -356,6 +394,7 @@ class MotorBus:
         data, _ = self.read_raw(reg.address, reg.size, dxl_id)
         return reg.decode(data)
 
+    @_locked
     def write(self, reg: Reg, dxl_id: int, value: int, *, check_alert: bool = True) -> None:
         """Write one register of one motor and wait for its status."""
         data = _payload(reg, value, Instruction.WRITE)
@@ -370,6 +409,7 @@ class MotorBus:
             error &= ~ALERT_BIT
         self.check_status(dxl_id, error, f"write of {reg.name.lower()}={value}")
 
+    @_locked
     def sync_write(self, reg: Reg, values: Mapping[int, int]) -> None:
         """One SYNC_WRITE of `reg` to several motors. No reply: read back if it matters."""
         group = GroupSyncWrite(self._port(), self.packet, reg.address, reg.size)
@@ -380,6 +420,7 @@ class MotorBus:
             return group.txPacket(), None
         self._retry(f"sync write of {reg.name.lower()}", list(values), attempt)
 
+    @_locked
     def sync_read(self, regs: Sequence[Reg], ids: Sequence[int]) -> dict[int, dict[Reg, int]]:
         """Read the span covering `regs` from every motor in `ids` with one SYNC_READ.
 
@@ -425,14 +466,28 @@ class MotorBus:
         return {i: v[reg] for i, v in self.sync_read([reg], ids).items()}
 
     # ----------------------------------------------------------------- conveniences
+    @_locked
     def set_torque(self, ids: Iterable[int], on: bool) -> None:
-        """Switch torque on or off, motor by motor (each write is acknowledged)."""
+        """Switch torque on or off, motor by motor (each write is acknowledged). With a
+        `watchdog`, register 98 is written 0 first (which also clears an expired watchdog,
+        whose read-only goals would refuse the next move), then, switching on, armed."""
         for dxl_id in ids:
+            if self.watchdog:
+                self.write(Reg.BUS_WATCHDOG, dxl_id, 0)
+                if on:
+                    self.write(Reg.BUS_WATCHDOG, dxl_id, self.watchdog)
             self.write(Reg.TORQUE_ENABLE, dxl_id, int(on))
 
+    def watchdog_expired(self, dxl_id: int) -> bool:
+        """Whether a motor's Bus Watchdog has expired (98 reads -1; never with no
+        `watchdog`, as register 98 is then not this bus's to read)."""
+        return bool(self.watchdog) and self.read(Reg.BUS_WATCHDOG, dxl_id) == WATCHDOG_EXPIRED
+
+    @_locked
     def torque_off_everywhere(self, ids: Iterable[int]) -> list[str]:
         """Best effort, for shutdown: a broadcast torque-off (reaches a motor whose replies
-        are lost), then each motor acknowledged. Returns problems instead of raising."""
+        are lost), then each motor acknowledged: its Bus Watchdog disarmed (with a
+        `watchdog`), then its torque off. Returns problems instead of raising."""
         problems = []
         port = self.port
         if port is None:
@@ -443,14 +498,51 @@ class MotorBus:
         except (serial.SerialException, OSError) as exc:
             problems.append(f"broadcast torque off failed: {exc}")
         for dxl_id in ids:
-            try:
-                self.write(Reg.TORQUE_ENABLE, dxl_id, 0, check_alert=False)
-            except HardwareError as exc:
-                problems.append(str(exc))
-            except (serial.SerialException, OSError) as exc:
-                problems.append(f"{self.label(dxl_id)}: torque off failed: {exc}")
+            regs = ([Reg.BUS_WATCHDOG] if self.watchdog else []) + [Reg.TORQUE_ENABLE]
+            for reg in regs:
+                try:
+                    self.write(reg, dxl_id, 0, check_alert=False)
+                except HardwareError as exc:
+                    problems.append(str(exc))
+                except (serial.SerialException, OSError) as exc:
+                    problems.append(f"{self.label(dxl_id)}: {reg.name.lower()} = 0 failed: "
+                                    f"{exc}")
         return problems
 
+    # ----------------------------------------------------------------- keep-alive
+    def start_keepalive(self, ids: Sequence[int], period: float) -> None:
+        """Read the Bus Watchdog of `ids` from a daemon thread whenever the bus has been idle
+        for `period` [s], so that a living process's pauses (a filter update of seconds, a
+        prompt) never let the motors' watchdogs expire; a killed process's thread dies with
+        it. Failures are left to the caller's next transaction to find and report."""
+        self.stop_keepalive()
+        self._keepalive_stop.clear()
+        ids = list(ids)
+
+        def feed() -> None:
+            while not self._keepalive_stop.wait(period / 4.0):
+                with self.lock:
+                    if self.port is None or self._keepalive_stop.is_set():
+                        return
+                    if time.monotonic() - self.last_used < period:
+                        continue
+                    try:
+                        self.sync_read_one(Reg.BUS_WATCHDOG, ids)
+                    except (HardwareError, serial.SerialException, OSError) as exc:
+                        log.debug("%s: keep-alive read failed: %s", self.port_name, exc)
+                        self.last_used = time.monotonic()
+
+        self._keepalive = threading.Thread(target=feed, name="dxl-keepalive", daemon=True)
+        self._keepalive.start()
+
+    def stop_keepalive(self) -> None:
+        """Stop the keep-alive thread (waits for its transaction, if one is under way)."""
+        self._keepalive_stop.set()
+        thread, self._keepalive = self._keepalive, None
+        if thread is not None and thread is not threading.current_thread():
+            thread.join(timeout=2.0)
+
+    @_locked
     def reboot(self, dxl_id: int) -> None:
         """REBOOT a motor (clears a hardware error; torque comes back off)."""
         def attempt():

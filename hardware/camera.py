@@ -19,7 +19,7 @@ class CameraError(HardwareError):
 
 
 class FrameSource(Protocol):
-    """Latest-frame camera."""
+    """Latest-frame camera; its `name` (if it has one) is what messages call it."""
 
     def read(self) -> np.ndarray | None:
         """The newest image (H x W x 3, uint8), or None if none is available."""
@@ -45,6 +45,7 @@ class OpenCVCamera:
 
         self._cv2 = cv2
         self.index = index
+        self.name = f"camera {index} (/dev/video{index})"
         self.drain = drain
         self.size = (width, height) if width and height else None
         self.cap = cv2.VideoCapture(index)
@@ -84,10 +85,13 @@ class FakeCamera:
     Args:
         width, height: size of the blank image [px].
         source: called for each frame; returns an image or None (a dropped frame).
+        name: what messages call it.
     """
 
     def __init__(self, width: int = 640, height: int = 480,
-                 source: Callable[[], np.ndarray | None] | None = None) -> None:
+                 source: Callable[[], np.ndarray | None] | None = None,
+                 name: str = "the fake camera") -> None:
+        self.name = name
         self.width, self.height = width, height
         self.source = source
         self.frames = 0

@@ -13,13 +13,23 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
 
-from hardware.control_table import EXTENDED_POSITION_LIMIT, SDK_BAUD_RATES, OperatingMode
+from hardware.control_table import (
+    EXTENDED_POSITION_LIMIT,
+    SDK_BAUD_RATES,
+    WATCHDOG_MAX,
+    WATCHDOG_UNIT_MS,
+    OperatingMode,
+)
 from vlr.spec import SpecError, load_hand, load_object, load_yaml_mapping
 
 #: `bus.port` value that runs the bus against an in-process emulator (a dry run).
 EMULATOR_PORT = "emulator"
 
 FAKE_CAMERAS = ("blank", "sim")
+
+#: The shortest Bus Watchdog accepted [ms]: a transaction retried after timeouts may take
+#: tens of milliseconds, and the keep-alive reads at a quarter of the watchdog.
+MIN_WATCHDOG_MS = 200
 PLANTS = ("kinematic", "sim")
 RUN_MODES = {"extended_position": OperatingMode.EXTENDED_POSITION,
              "current_based_position": OperatingMode.CURRENT_BASED_POSITION}
@@ -32,13 +42,22 @@ class HardwareConfigError(SpecError):
 @dataclass(frozen=True)
 class BusConfig:
     """Serial bus. port: device path or "emulator"; baud [bit/s]; latency_ms: USB latency
-    budget per packet timeout [ms]; retries: extra tries per failed transaction."""
+    budget per packet timeout [ms]; retries: extra tries per failed transaction;
+    watchdog_ms: each motor's Bus Watchdog (98) while its torque is on [ms, a multiple of
+    20]: a motor that hears no instruction packet for this long stops (a killed host); 0
+    leaves it off."""
 
     port: str
     baud: int = 57_600
     protocol: int = 2
     latency_ms: float = 16.0
     retries: int = 2
+    watchdog_ms: int = 2000
+
+    @property
+    def watchdog(self) -> int:
+        """`watchdog_ms` in register 98's units of 20 ms."""
+        return self.watchdog_ms // WATCHDOG_UNIT_MS
 
 
 @dataclass(frozen=True)
@@ -138,11 +157,14 @@ class GraspConfig:
 @dataclass(frozen=True)
 class CameraConfig:
     """index: OpenCV device index; fake: "blank" or "sim" instead of a device; calibration:
-    camera calibration YAML (vlr.camera.load_calibration); None only with fake "sim"."""
+    camera calibration YAML (vlr.camera.load_calibration); None only with fake "sim";
+    max_missing_frames: this many reads in a row without a frame stop the run (torque off),
+    so that a dead camera is never taken for a held grasp."""
 
     index: int | None = None
     fake: str | None = None
     calibration: Path | None = None
+    max_missing_frames: int = 3
 
 
 @dataclass(frozen=True)
@@ -342,9 +364,14 @@ def _bus(s: _Section) -> BusConfig:
     if protocol not in (2, 2.0):
         s.fail(s.key("protocol"), protocol, "is not supported: only Protocol 2.0 (X series) "
                "is implemented")
+    watchdog_ms = s.integer("watchdog_ms", 2000, lo=0, hi=WATCHDOG_MAX * WATCHDOG_UNIT_MS)
+    if watchdog_ms and (watchdog_ms % WATCHDOG_UNIT_MS or watchdog_ms < MIN_WATCHDOG_MS):
+        s.fail(s.key("watchdog_ms"), watchdog_ms, f"must be 0 (off) or a multiple of "
+               f"{WATCHDOG_UNIT_MS} ms from {MIN_WATCHDOG_MS} to "
+               f"{WATCHDOG_MAX * WATCHDOG_UNIT_MS} (register 98's unit and range)")
     out = BusConfig(port=port, baud=baud, protocol=2,
                     latency_ms=s.number("latency_ms", 16.0, lo=0.0),
-                    retries=s.integer("retries", 2, lo=0, hi=10))
+                    retries=s.integer("retries", 2, lo=0, hi=10), watchdog_ms=watchdog_ms)
     s.done()
     return out
 
@@ -420,8 +447,10 @@ def _camera(s: _Section, base: Path) -> CameraConfig:
     elif fake != "sim":
         raise HardwareConfigError(f"{s.path}: missing key 'camera.calibration' (the camera "
                                   "calibration YAML; only camera.fake = 'sim' brings its own)")
+    missing = s.integer("max_missing_frames", 3, lo=1, hi=1000)
     s.done()
-    return CameraConfig(index=index, fake=fake, calibration=calibration)
+    return CameraConfig(index=index, fake=fake, calibration=calibration,
+                        max_missing_frames=missing)
 
 
 def _calibration(s: _Section | None) -> CalibrationConfig:

@@ -35,6 +35,12 @@ VELOCITY_UNIT_RPM = 0.229
 #: Goal Position range in extended position mode [ticks] (+-256 revolutions).
 EXTENDED_POSITION_LIMIT = 1_048_575
 
+#: Unit of Bus Watchdog (98) [ms]; 1..127 arms it, 0 disarms it (and clears its error), and
+#: the motor sets it to -1 when it expires (firmware v38 and later).
+WATCHDOG_UNIT_MS = 20
+WATCHDOG_MAX = 127
+WATCHDOG_EXPIRED = -1
+
 #: Model numbers read at address 0, for messages and for the emulator's default.
 MODEL_NUMBERS: dict[int, str] = {
     1020: "XM430-W350",
@@ -69,6 +75,8 @@ class Reg(Enum):
     STATUS_RETURN_LEVEL = (68, 1, False)
     HARDWARE_ERROR_STATUS = (70, 1, False)
     POSITION_P_GAIN = (84, 2, False)
+    BUS_WATCHDOG = (98, 1, True)
+    GOAL_PWM = (100, 2, True)
     GOAL_CURRENT = (102, 2, True)
     GOAL_VELOCITY = (104, 4, True)
     PROFILE_ACCELERATION = (108, 4, False)
@@ -115,6 +123,12 @@ READ_ONLY = frozenset({
     Reg.MOVING_STATUS, Reg.PRESENT_PWM, Reg.PRESENT_CURRENT, Reg.PRESENT_VELOCITY,
     Reg.PRESENT_POSITION, Reg.PRESENT_INPUT_VOLTAGE, Reg.PRESENT_TEMPERATURE,
 })
+
+
+#: The goal registers a motor makes read-only while its Bus Watchdog has expired: a write gets
+#: data range error 4 until 98 is written 0 (e-manual, "Bus Watchdog(98)").
+WATCHDOG_LOCKED = frozenset({Reg.GOAL_PWM, Reg.GOAL_CURRENT, Reg.GOAL_VELOCITY,
+                             Reg.GOAL_POSITION})
 
 
 class OperatingMode(IntEnum):

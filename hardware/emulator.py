@@ -16,6 +16,13 @@ nor answers), and hardware errors (e.g. overload, bit 5 of register 70), now or 
 of served packets, which switch torque off and set the alert bit 0x80 in every status until
 REBOOT.
 
+The Bus Watchdog (98) is emulated: a motor with torque on and 98 set to 1..127 counts the
+time since the last instruction packet addressed to it (to its id, broadcast, or a sync or
+bulk packet listing it); past 98 x 20 ms it sets 98 to -1, switches its torque off (the
+emulated motor releases: see hardware/README.md for what the e-manual says of the real one)
+and refuses goal writes (data range error) until 98 is written 0. `Emulator.pass_time`
+ages those clocks, to play a host that stopped talking without waiting for it.
+
 Multi-turn position is lost on REBOOT, as on the real motor: present position then reads
 within one turn (0..4095). Plants see the continuous `shaft` angle, which a reboot does not
 change.
@@ -42,6 +49,10 @@ from hardware.control_table import (
     READ_ONLY,
     TICKS_PER_REV,
     VELOCITY_UNIT_RPM,
+    WATCHDOG_EXPIRED,
+    WATCHDOG_LOCKED,
+    WATCHDOG_MAX,
+    WATCHDOG_UNIT_MS,
     HardwareError,
     OperatingMode,
     Reg,
@@ -128,6 +139,7 @@ class EmulatedMotor:
         self.current = 0.0         # [mA], signed
         self.moving = False
         self.faults = Faults()
+        self.heard = time.monotonic()  # when the last instruction packet to it arrived
         self.set(Reg.GOAL_POSITION, self.present_position)
 
     # ----------------------------------------------------------------- register access
@@ -182,6 +194,19 @@ class EmulatedMotor:
         self.set(Reg.HARDWARE_ERROR_STATUS, self.get(Reg.HARDWARE_ERROR_STATUS) | bits)
         self.set(Reg.TORQUE_ENABLE, 0)
 
+    def watchdog(self, now: float) -> bool:
+        """Expire the Bus Watchdog if it is armed, torque is on and nothing has been heard
+        for longer than 98 x 20 ms: 98 := -1, torque off. Returns whether it expired now."""
+        units = self.get(Reg.BUS_WATCHDOG)
+        if units <= 0 or not self.torque_on:
+            return False
+        if now - self.heard <= units * WATCHDOG_UNIT_MS / 1000.0:
+            return False
+        self.set(Reg.BUS_WATCHDOG, WATCHDOG_EXPIRED)
+        self.set(Reg.TORQUE_ENABLE, 0)
+        self.velocity, self.moving = 0.0, False
+        return True
+
     def error_byte(self, number: int = 0) -> int:
         return number | (ALERT_BIT if self.get(Reg.HARDWARE_ERROR_STATUS) else 0)
 
@@ -217,6 +242,11 @@ class EmulatedMotor:
             return ERR_DATA_RANGE
         if Reg.TORQUE_ENABLE in new and new[Reg.TORQUE_ENABLE] not in (0, 1):
             return ERR_DATA_RANGE
+        if Reg.BUS_WATCHDOG in new and not 0 <= new[Reg.BUS_WATCHDOG] <= WATCHDOG_MAX:
+            return ERR_DATA_RANGE  # -1 is the motor's to set
+        if (self.get(Reg.BUS_WATCHDOG) == WATCHDOG_EXPIRED
+                and any(r in WATCHDOG_LOCKED for r in touched)):
+            return ERR_DATA_RANGE  # goals are read-only until 98 is written 0
         if Reg.GOAL_CURRENT in new and abs(new[Reg.GOAL_CURRENT]) > self.get(Reg.CURRENT_LIMIT):
             return ERR_DATA_LIMIT
         if Reg.GOAL_POSITION in new and not self._goal_ok(new[Reg.GOAL_POSITION]):
@@ -341,6 +371,7 @@ class Emulator:
         self.lock = threading.RLock()
         self.packets_served = 0
         self.dropped = 0  # instruction packets lost on the wire (`drop_instructions`)
+        self.watchdog_expiries = 0  # Bus Watchdogs that expired (motors that let go)
         self._rng = random.Random(seed)
         self._late: list[tuple[float, bytes]] = []  # (when, bytes) waiting to be sent
         self._line_free = 0.0  # when the last queued bytes leave: later ones go after them
@@ -431,6 +462,14 @@ class Emulator:
             f.drop_share = share
             f.drop_only = None if only is None else frozenset(int(i) for i in only)
 
+    def pass_time(self, seconds: float) -> None:
+        """Make every motor's Bus Watchdog see `seconds` more without a packet, as if the
+        host had been silent that long (a killed process); the plant does not move for it.
+        The next service tick expires the watchdogs that this takes past their limit."""
+        with self.lock:
+            for m in self.motors.values():
+                m.heard -= seconds
+
     # ----------------------------------------------------------------- serving
     def _serve(self) -> None:
         while not self._stop.is_set():
@@ -449,6 +488,10 @@ class Emulator:
                     time.sleep(self.tick)
             with self.lock:
                 self._advance()
+                now = time.monotonic()
+                for m in self.motors.values():
+                    if m.watchdog(now):
+                        self.watchdog_expiries += 1
                 self._send_due()
                 for packet in self._parser.feed(data) if data else ():
                     reply = self._handle(packet)
@@ -540,6 +583,9 @@ class Emulator:
         if not p.crc_ok:
             return self._status(targets[0], ERR_CRC) if unicast and targets else b""
         inst, params = p.instruction, p.params
+        now = time.monotonic()
+        for m in self._addressed(inst, params, targets, unicast):
+            m.heard = now  # any instruction packet to a motor feeds its Bus Watchdog
         if inst == Instruction.PING:
             return b"".join(self._status(m, 0, m.get(Reg.MODEL_NUMBER).to_bytes(2, "little")
                                          + bytes([m.get(Reg.FIRMWARE_VERSION)]))
@@ -588,6 +634,25 @@ class Emulator:
             return b"".join(out)
         # REG_WRITE/ACTION, FACTORY_RESET, fast sync read etc. are not emulated.
         return self._status(targets[0], ERR_INSTRUCTION) if unicast and targets else b""
+
+
+    def _addressed(self, inst: int, params: bytes, targets: list[EmulatedMotor],
+                   unicast: bool) -> list[EmulatedMotor]:
+        """The motors a packet is addressed to: its target, every motor for a broadcast,
+        only the listed ones for a sync or bulk packet."""
+        if unicast or inst not in (Instruction.SYNC_READ, Instruction.SYNC_WRITE,
+                                   Instruction.BULK_READ):
+            return targets
+        if len(params) < 4:
+            return []
+        if inst == Instruction.SYNC_READ:
+            ids = set(params[4:])
+        elif inst == Instruction.SYNC_WRITE:
+            length = _u16(params, 2)
+            ids = set(params[4::length + 1])
+        else:
+            ids = set(params[0::5])
+        return [m for m in targets if m.dxl_id in ids]
 
 
 def _u16(data: bytes, offset: int) -> int:

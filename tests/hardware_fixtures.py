@@ -71,16 +71,18 @@ def make_config(tmp_path: Path, **overrides: Any) -> HardwareConfig:
 
 
 @contextlib.contextmanager
-def hand_on_emulator(cfg: HardwareConfig) -> Iterator[tuple[HardwareHand, Emulator]]:
-    """A started emulator for `cfg` and a hand on it; the emulator outlives the hand so that
-    tests can inspect the torque registers after the hand closed."""
+def hand_on_emulator(cfg: HardwareConfig, camera: FakeCamera | None = None
+                     ) -> Iterator[tuple[HardwareHand, Emulator]]:
+    """A started emulator for `cfg` and a hand on it (with `camera`, default a blank one);
+    the emulator outlives the hand so that tests can inspect the torque registers after the
+    hand closed."""
     from hardware.backend import HardwareHand
 
     emulator, _ = build_emulator(cfg)
     emulator.start()
     try:
         hand = HardwareHand(cfg, spec=load_hand(cfg.hand), object_spec=OBJECT,
-                            calibration=CALIBRATION, camera=FakeCamera(64, 48),
+                            calibration=CALIBRATION, camera=camera or FakeCamera(64, 48),
                             port=emulator.port, log=lambda message: None)
         try:
             yield hand, emulator
