@@ -98,3 +98,75 @@ def test_an_unreachable_ray_address_is_named_at_once(sweep_file, tmp_path, capsy
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and repr(address) in err[0]
     assert not (tmp_path / "o" / "trials").exists()
+
+
+# A sweep whose "slow" trial runs long enough to be killed once both quick ones are done.
+KILL_SWEEP = """\
+name: worker death
+seeds: 0
+settings: {world.backend: synthetic, filter.particles: 200, loop.max_iterations: 2}
+cases:
+  - {name: quick, world.object: apple}
+  - {name: quick, world.object: wine_glass}
+  - {name: slow, filter.particles: 60000, loop.max_iterations: 60, loop.min_iterations: 60}
+"""
+
+
+def _kill_the_slow_worker(out, found, give_up):
+    """Once both quick trials' records exist, SIGKILL the Ray worker running a trial (the
+    slow one: Ray titles a busy worker `ray::<function>`)."""
+    import os
+    import signal
+    import time
+
+    import psutil
+
+    while time.monotonic() < give_up:
+        quick = list((out / "trials").glob("quick_*.json"))
+        if len(quick) == 2:
+            for p in psutil.Process().children(recursive=True):
+                try:
+                    title = p.cmdline()
+                except psutil.Error:
+                    continue
+                if title and title[0].startswith("ray::_ray_trial"):
+                    os.kill(p.pid, signal.SIGKILL)
+                    found.append(p.pid)
+                    return
+        time.sleep(0.2)
+
+
+def test_a_killed_ray_worker_is_a_failed_trial_and_the_sweep_goes_on(ray_instance, tmp_path,
+                                                                     capsys):
+    import json
+    import threading
+    import time
+
+    from vlr.sweep import expand, load_sweep, pending
+
+    path, out = tmp_path / "kill.yaml", tmp_path / "out"
+    path.write_text(KILL_SWEEP + f"out: {out}\n")
+    trials = expand(load_sweep(path))
+    slow = next(t for t in trials if t.case == "slow")
+    killed: list[int] = []
+    killer = threading.Thread(target=_kill_the_slow_worker,
+                              args=(out, killed, time.monotonic() + 60), daemon=True)
+    killer.start()
+    # The sweep ends (one failed trial: exit 1) instead of stopping at the death.
+    assert main(["sweep", str(path), "--executor", "ray", "--quiet"]) == 1
+    killer.join()
+    assert killed, "no Ray worker was found running the slow trial"
+    records = {p.stem: json.loads(p.read_text()) for p in (out / "trials").glob("*.json")}
+    assert len(records) == 3
+    assert [r["status"] for r in records.values()].count("ok") == 2
+    dead = records[slow.id]
+    assert dead["status"] == "error" and "WorkerCrashedError" in dead["error"]
+    assert "\n" not in dead["error"]
+    assert dead["settings"] == slow.settings.flat() and dead["case"] == "slow"
+    assert "code" in dead and "group" in dead
+    # The tables list it; --resume leaves it, --retry-failed would run it again.
+    assert len(_table(out / "table.csv")) == 3
+    assert "Failed trials" in (out / "summary.md").read_text()
+    assert f"trial {slow.id} failed: WorkerCrashedError" in capsys.readouterr().out
+    assert pending(trials, out) == []
+    assert pending(trials, out, retry_failed=True) == [slow]

@@ -2,23 +2,32 @@
 (`run_ray`). Both call `vlr.sweep.run_one` once per trial, so each finished trial lands in
 OUT/trials/<id>.json as it finishes and `--resume` works the same whichever ran it.
 
+A sweep stops on SIGINT or SIGTERM (`stop_on_signals`): no trial starts after the signal,
+the trials in flight are abandoned (local workers terminated, Ray tasks cancelled), the
+finished ones stay on disk for `--resume`, and the CLI exits 128 + the signal's number.
+
 Ray is optional (`pip install -e .[cluster]`); it is imported only by `run_ray`.
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import socket
-from collections.abc import Callable
+import threading
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from vlr.errors import UserError
+from vlr.errors import Interrupted, UserError
 
 if TYPE_CHECKING:
     from vlr.sweep import Trial
 
-__all__ = ["EXECUTORS", "run_local", "run_ray", "import_ray", "check_reachable"]
+__all__ = ["EXECUTORS", "run_local", "run_ray", "import_ray", "check_reachable",
+           "stop_on_signals"]
 
 EXECUTORS = ("local", "ray")
 
@@ -41,12 +50,48 @@ def check_reachable(address: str, timeout: float = 5.0) -> None:
         raise UserError(f"cannot reach the Ray cluster at {address!r}: {exc}") from None
 
 
+# --------------------------------------------------------------------------- stopping
+
+_STOP_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+@contextlib.contextmanager
+def stop_on_signals() -> Iterator[None]:
+    """SIGINT and SIGTERM raise `Interrupted` in the main thread while the block runs.
+
+    SIGTERM's default action would end this process at once and leave a pool's workers
+    computing, then blocked on a queue nobody reads; as an exception it goes through the
+    executors' clean-up (workers terminated, Ray tasks cancelled) and the CLI's exit code
+    143. After the first signal both are ignored until the block ends, so that a second
+    Ctrl-C cannot cut that clean-up short. Outside the main thread (signals cannot be
+    handled there) the block runs as it is."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+
+    def stop(signum: int, frame: object) -> None:
+        for sig in _STOP_SIGNALS:
+            signal.signal(sig, signal.SIG_IGN)
+        raise Interrupted(signum)
+
+    old = {sig: signal.signal(sig, stop) for sig in _STOP_SIGNALS}
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+
+
 # --------------------------------------------------------------------------- local pool
 
 def run_local(trials: list[Trial], out: Path, workers: int | None, on_done: OnDone,
               keep_files: bool = False) -> None:
     """Run trials on a local process pool (`workers` processes; 1 or None runs them in this
-    process). Each worker gets an equal share of the cores for numba's threads."""
+    process). Each worker gets an equal share of the cores for numba's threads.
+
+    An exception here (`Interrupted` from `stop_on_signals`, Ctrl-C) terminates the
+    workers, so that no trial runs on after it: the trials in flight are lost, to be run by
+    `--resume`."""
     from vlr.sweep import run_one
 
     workers = workers or 1
@@ -59,16 +104,53 @@ def run_local(trials: list[Trial], out: Path, workers: int | None, on_done: OnDo
 
     threads = max(1, (os.cpu_count() or 1) // workers)
     # spawn, not fork: forking a process whose numba threads already ran is unsafe.
-    with ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
-                             initargs=(threads,),
-                             mp_context=multiprocessing.get_context("spawn")) as pool:
+    pool = ProcessPoolExecutor(max_workers=workers, initializer=_init_worker,
+                               initargs=(threads, os.getpid()),
+                               mp_context=multiprocessing.get_context("spawn"))
+    try:
         futures = [pool.submit(run_one, t, out, keep_files) for t in trials]
         for f in as_completed(futures):
             on_done(f.result())
+    except BaseException:
+        _stop_pool(pool)
+        raise
+    pool.shutdown()
 
 
-def _init_worker(threads: int) -> None:
+def _stop_pool(pool: Any, grace: float = 2.0) -> None:
+    """Terminate a ProcessPoolExecutor's workers (SIGTERM, then SIGKILL after `grace`
+    seconds) and drop its queued trials. `shutdown(cancel_futures=True)` alone would let
+    every worker finish the trial it holds and start the one queued for it; Python 3.11's
+    executor has no public way to end its workers (3.14's `terminate_workers`)."""
+    processes = list(getattr(pool, "_processes", {}).values())
+    for p in processes:
+        with contextlib.suppress(OSError):
+            p.terminate()
+    deadline = time.monotonic() + grace
+    for p in processes:
+        p.join(max(0.0, deadline - time.monotonic()))
+        if p.is_alive():
+            with contextlib.suppress(OSError):
+                p.kill()
+            p.join(1.0)
+    pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _init_worker(threads: int, parent: int) -> None:
+    """A pool worker: its share of numba's threads; SIGINT ignored (a Ctrl-C reaches the
+    whole process group, and the main process decides: it terminates the workers); and a
+    watch on the main process, so that a worker whose sweep was killed (SIGKILL, out of
+    memory) exits instead of computing a trial nobody collects, then waiting forever."""
     os.environ["NUMBA_NUM_THREADS"] = str(threads)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True,
+                     name="vlr-parent-watch").start()
+
+
+def _exit_with_parent(parent: int, period: float = 0.5) -> None:
+    while os.getppid() == parent:
+        time.sleep(period)
+    os._exit(1)
 
 
 # --------------------------------------------------------------------------- Ray
@@ -125,7 +207,7 @@ def run_ray(trials: list[Trial], out: Path, workers: int | None, on_done: OnDone
     if not trials:
         return
     from vlr.io import write_json_atomic
-    from vlr.sweep import trial_path
+    from vlr.sweep import failure_record, trial_path
 
     out = Path(out).resolve()
     # The job's runtime_env (Ray ships a working_dir at the job level only, in ray.init).
@@ -169,23 +251,35 @@ def run_ray(trials: list[Trial], out: Path, workers: int | None, on_done: OnDone
         limit = len(trials) if (local or not workers) else workers
         queue = list(trials)
         running: dict[Any, Trial] = {}
-        while queue or running:
-            while queue and len(running) < limit:
-                t = queue.pop(0)
-                running[task.remote(t, str(out), keep_files, threads)] = t
-            done, _ = ray.wait(list(running), num_returns=1)
-            for ref in done:
-                t = running.pop(ref)
-                try:
-                    record = ray.get(ref)
-                except Exception as exc:  # noqa: BLE001 - the task died: a failed trial
-                    record = {"id": t.id, "case": t.case, "settings": t.settings.to_dict(),
-                              "status": "error", "error": f"{type(exc).__name__}: "
-                              f"{str(exc).strip().splitlines()[0] if str(exc) else ''}"}
-                    write_json_atomic(trial_path(out, t), record)
-                if not trial_path(out, t).exists():
-                    write_json_atomic(trial_path(out, t), record)
-                on_done(record)
+        try:
+            while queue or running:
+                while queue and len(running) < limit:
+                    t = queue.pop(0)
+                    running[task.remote(t, str(out), keep_files, threads)] = t
+                done, _ = ray.wait(list(running), num_returns=1)
+                for ref in done:
+                    t = running.pop(ref)
+                    try:
+                        record = ray.get(ref)
+                    except Exception as exc:  # noqa: BLE001 - the task died: a failed trial
+                        record = failure_record(t, _ray_error(exc))
+                        write_json_atomic(trial_path(out, t), record)
+                    if not trial_path(out, t).exists():
+                        write_json_atomic(trial_path(out, t), record)
+                    on_done(record)
+        except BaseException:
+            # Stopped (a signal, Ctrl-C): the tasks in flight would run on, on a cluster,
+            # after this driver has gone.
+            for ref in running:
+                with contextlib.suppress(Exception):
+                    ray.cancel(ref, force=True)
+            raise
     finally:
         if started:
             ray.shutdown()
+
+
+def _ray_error(exc: Exception) -> str:
+    """A dead task's error in one line: Ray's messages run to paragraphs of advice."""
+    text = str(exc).strip()
+    return f"{type(exc).__name__}: {text.splitlines()[0] if text else ''}".rstrip(": ")

@@ -33,7 +33,9 @@ import hashlib
 import io
 import itertools
 import json
+import logging
 import math
+import re
 import traceback
 from collections.abc import Iterable
 from dataclasses import dataclass
@@ -49,7 +51,10 @@ from vlr.io import write_json_atomic, write_text_atomic
 from vlr.settings import Settings, load_settings
 
 __all__ = ["Trial", "SweepSpec", "load_sweep", "parse_seeds", "expand", "run_one",
-           "pending", "collect", "write_tables", "COLUMNS", "run_local", "run_ray"]
+           "failure_record", "pending", "collect", "remove_temp_files", "write_tables",
+           "COLUMNS", "run_local", "run_ray"]
+
+_LOG = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True)
@@ -241,29 +246,53 @@ def trial_path(out: Path, trial: Trial) -> Path:
 
 
 def read_record(path: Path) -> dict[str, Any]:
-    """One trial record; a file that is not one (edited by hand, a full disk) is a UserError
-    naming it."""
+    """One trial record; a file that is not one (cut short, edited by hand, a full disk) is
+    a UserError naming it."""
     try:
         rec = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise UserError(f"trial record {path} is not valid JSON ({exc}); delete it to run "
-                        f"that trial again") from None
+        raise UserError(f"trial record {path} is not valid JSON ({exc})") from None
     if not isinstance(rec, dict) or "status" not in rec:
-        raise UserError(f"trial record {path} has no 'status'; delete it to run that trial "
-                        f"again")
+        raise UserError(f"trial record {path} has no 'status'")
     return rec
 
 
 def pending(trials: Iterable[Trial], out: Path, retry_failed: bool = False) -> list[Trial]:
-    """Trials without a result file (and failed ones, if asked)."""
+    """Trials without a readable record (and failed ones, if asked).
+
+    A record that cannot be read (cut short by a crash on a filesystem that does not rename
+    atomically, or edited by hand) is a trial to run again, with a warning naming it: it must
+    not stop the sweep it belongs to from resuming."""
     todo = []
     for t in trials:
         p = trial_path(out, t)
         if not p.exists():
             todo.append(t)
-        elif retry_failed and read_record(p).get("status") != "ok":
+            continue
+        try:
+            status = read_record(p).get("status")
+        except UserError as exc:
+            _LOG.warning("%s: running that trial again", exc)
+            todo.append(t)
+            continue
+        if retry_failed and status != "ok":
             todo.append(t)
     return todo
+
+
+def _record(trial: Trial) -> dict[str, Any]:
+    """What every record of `trial` holds, whatever became of it."""
+    from vlr.provenance import code_version
+
+    return {"id": trial.id, "case": trial.case, "group": trial.group,
+            "settings": trial.settings.flat(), "code": code_version()}
+
+
+def failure_record(trial: Trial, error: str) -> dict[str, Any]:
+    """The record of a trial that produced no result (the executor's worker died): the same
+    fields as `run_one`'s failed trials, so the tables list it and `--retry-failed` reruns
+    it."""
+    return {**_record(trial), "status": "error", "error": error}
 
 
 def run_one(trial: Trial, out: Path, keep_files: bool = False,
@@ -273,11 +302,9 @@ def run_one(trial: Trial, out: Path, keep_files: bool = False,
 
     Runs in a worker process (top-level function: picklable) or a Ray task
     (`vlr.executors`). Seeds fix its numbers whichever worker runs it."""
-    from vlr.provenance import code_version
     from vlr.run import run_identification
 
-    record: dict[str, Any] = {"id": trial.id, "case": trial.case, "group": trial.group,
-                              "settings": trial.settings.flat(), "code": code_version()}
+    record = _record(trial)
     try:
         run = run_identification(trial.settings)
         if keep_files:
@@ -291,6 +318,31 @@ def run_one(trial: Trial, out: Path, keep_files: bool = False,
     if write:
         write_json_atomic(trial_path(out, trial), record)
     return record
+
+
+# `vlr.io.atomic_path`'s temporary files: "." + the file's stem + "." + mkstemp's 8 random
+# characters + the file's suffix. A killed writer leaves one behind.
+_TEMP_FILE = re.compile(r"^\..+\.[A-Za-z0-9_]{8}\.[A-Za-z0-9]+$")
+
+
+def remove_temp_files(out: Path) -> int:
+    """Remove the temporary files of atomic writes that a kill interrupted, in OUT (the
+    tables), OUT/trials (the records) and OUT/trials/<id> (`--keep-files`); how many.
+
+    They are never read as results (records are found by their trials' ids, `collect`
+    skips dot files); removing them keeps a resumed folder the one an uninterrupted run
+    leaves. Called before any trial of the sweep runs, when nothing of it is writing."""
+    trials = out / "trials"
+    folders = [out, trials, *(trials.iterdir() if trials.is_dir() else ())]
+    removed = 0
+    for folder in folders:
+        if not folder.is_dir():
+            continue
+        for p in folder.iterdir():
+            if p.is_file() and _TEMP_FILE.match(p.name):
+                p.unlink(missing_ok=True)
+                removed += 1
+    return removed
 
 
 # --------------------------------------------------------------------------- tables
@@ -428,14 +480,31 @@ def _row(rec: dict[str, Any]) -> dict[str, Any]:
     return row
 
 
-def collect(out: Path, trials: Iterable[Trial] | None = None) -> list[dict[str, Any]]:
+def collect(out: Path, trials: Iterable[Trial] | None = None,
+            skip_unreadable: bool = False) -> list[dict[str, Any]]:
     """The records of the sweep's trials found in OUT/trials (all of them if trials is None),
-    in the sweep's order."""
+    in the sweep's order.
+
+    A record that cannot be read is a UserError naming it, or, with `skip_unreadable` (the
+    tables a run writes as it ends, an interrupted one included), left out with a warning:
+    its trial is run again on `--resume`."""
     if trials is None:
-        paths = sorted((out / "trials").glob("*.json"))
+        paths = sorted(p for p in (out / "trials").glob("*.json")
+                       if not p.name.startswith("."))
     else:
         paths = [trial_path(out, t) for t in trials]
-    return [read_record(p) for p in paths if p.exists()]
+    records = []
+    for p in paths:
+        if not p.exists():
+            continue
+        try:
+            records.append(read_record(p))
+        except UserError as exc:
+            if not skip_unreadable:
+                raise UserError(f"{exc}: delete it, or rerun the sweep with --resume, to "
+                                "run that trial again") from None
+            _LOG.warning("%s: left out of the tables (--resume runs that trial again)", exc)
+    return records
 
 
 def _fmt(values: list[float], digits: int) -> str:

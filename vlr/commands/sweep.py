@@ -77,8 +77,9 @@ def _spec(args: argparse.Namespace):
 
 
 def run(args: argparse.Namespace) -> int:
-    from vlr.executors import import_ray, run_local, run_ray
-    from vlr.sweep import collect, expand, pending, write_tables
+    from vlr.executors import import_ray, run_local, run_ray, stop_on_signals
+    from vlr.io import check_output_dir
+    from vlr.sweep import collect, expand, pending, remove_temp_files, write_tables
 
     if args.workers is not None and args.workers < 1:
         raise UserError(f"--workers {args.workers} must be >= 1")
@@ -101,6 +102,11 @@ def run(args: argparse.Namespace) -> int:
     if done_before and not args.resume:
         raise UserError(f"{out} already holds {len(done_before)} finished trial(s) of this "
                         "sweep: pass --resume to finish it, or choose another --out")
+    # A bad --out (a file, under a file, unwritable) is one line now, not after a trial.
+    check_output_dir(out)
+    if removed := remove_temp_files(out):
+        _LOG.info("removed %d temporary file(s) of writes a kill interrupted in %s",
+                  removed, out)
     todo = pending(trials, out, retry_failed=args.retry_failed)
     print(f"sweep {spec.name!r}: {len(trials)} trials, {len(trials) - len(todo)} already "
           f"done, {len(todo)} to run -> {out}", flush=True)
@@ -123,21 +129,24 @@ def run(args: argparse.Namespace) -> int:
             bar.update(1)
 
     finished = False
-    try:
-        if args.executor == "ray":
-            run_ray(todo, out, args.workers, on_done, keep_files=args.keep_files,
-                    address=args.address, working_dir=args.working_dir)
-        else:
-            run_local(todo, out, args.workers, on_done, keep_files=args.keep_files)
-        finished = True
-    finally:
-        if bar is not None:
-            bar.close()
-        records = collect(out, trials)
-        # An interrupted sweep keeps the table of what finished; one that never started
-        # (a bad --address) leaves no empty tables behind.
-        if finished or records:
-            paths = write_tables(out, records, spec.name)
+    # Signals stop the trials (vlr.executors.stop_on_signals) and stay held off while the
+    # tables of what finished are written.
+    with stop_on_signals():
+        try:
+            if args.executor == "ray":
+                run_ray(todo, out, args.workers, on_done, keep_files=args.keep_files,
+                        address=args.address, working_dir=args.working_dir)
+            else:
+                run_local(todo, out, args.workers, on_done, keep_files=args.keep_files)
+            finished = True
+        finally:
+            if bar is not None:
+                bar.close()
+            records = collect(out, trials, skip_unreadable=True)
+            # An interrupted sweep keeps the table of what finished; one that never started
+            # (a bad --address) leaves no empty tables behind.
+            if finished or records:
+                paths = write_tables(out, records, spec.name)
     print(paths["summary_md"].read_text())
     print(f"{len(todo)} trial(s) in {time.perf_counter() - t0:.0f} s, {failed} failed; wrote "
           f"{paths['table']}, {paths['summary_csv']}, {paths['summary_md']}")
