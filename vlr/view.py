@@ -20,8 +20,11 @@ Python:
         identify(world, view.observing(observer), model, obj, nominal, cfg, watch=view)
         view.save_html("scene.html")
 
-meshcat-python 0.3.2 starts its own server process (tornado + zmq) and opens no browser;
-`Visualizer.close()` is broken there (AttributeError), so `FilterView.close()` kills the
+The server is meshcat-python 0.3.2's (tornado + zmq), started by `vlr._meshcat_server`
+rather than by meshcat: meshcat's own listens on every interface, without authentication,
+and outlives a killed parent. Ours listens on 127.0.0.1 only unless `host` says otherwise,
+and dies with the process that started it (see `FilterView`). It opens no browser.
+`Visualizer.close()` is broken in 0.3.2 (AttributeError), so `FilterView.close()` kills the
 server process itself, and is also registered with atexit.
 """
 
@@ -30,9 +33,16 @@ from __future__ import annotations
 import atexit
 import contextlib
 import io
+import os
+import select
 import shutil
+import signal
+import socket
 import subprocess
+import sys
 import tempfile
+import threading
+import time
 import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -41,7 +51,7 @@ from typing import Any
 
 import numpy as np
 
-from vlr.errors import MissingExtra
+from vlr.errors import Interrupted, MissingExtra, UserError
 from vlr.kinematics import HandModel, contact_points, joint_positions
 
 __all__ = ["COLORS", "Hypotheses", "hypotheses", "FilterView", "find_chromium", "screenshot"]
@@ -146,6 +156,90 @@ def _meshcat() -> Any:
     return meshcat
 
 
+# --------------------------------------------------------------------------- the server
+
+_SERVER_START_S = 60.0  # a start takes about a second; past this it is stuck, not slow
+
+
+def bind_address(host: str) -> str:
+    """The numeric address the view's server binds for `host` (a name or an address; IPv4
+    first), checked by binding a probe socket to it, so that a host this machine cannot
+    listen on is one clear line and not a server that tries a thousand ports.
+
+    Raises:
+        UserError: `host` does not resolve, or is not an address of this machine.
+    """
+    try:
+        infos = socket.getaddrinfo(host, None, type=socket.SOCK_STREAM)
+    except (socket.gaierror, UnicodeError, ValueError) as exc:
+        raise UserError(f"view host {host!r} is not an address or a known host name "
+                        f"({exc})") from None
+    infos.sort(key=lambda info: info[0] != socket.AF_INET)
+    family, address = infos[0][0], str(infos[0][4][0])
+    with socket.socket(family, socket.SOCK_STREAM) as probe:
+        try:
+            probe.bind((address, 0))
+        except OSError as exc:
+            raise UserError(f"view host {host!r}: this machine cannot listen on {address} "
+                            f"({exc.strerror or exc})") from None
+    return address
+
+
+def _start_server(address: str) -> tuple[subprocess.Popen, Any, str, str]:
+    """Start `vlr._meshcat_server` on `address`: (process, its stderr file, zmq URL to
+    connect to, web URL it serves). Its own session, so that a terminal's Ctrl-C reaches
+    only us and we stop it in order; it exits by itself when this process dies."""
+    from vlr._meshcat_server import connect_host, url_host
+
+    meshcat_root = Path(_meshcat().__file__).resolve().parent.parent
+    vlr_root = Path(__file__).resolve().parent.parent
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(
+        [str(vlr_root), str(meshcat_root)] + ([env["PYTHONPATH"]] if env.get("PYTHONPATH")
+                                              else []))
+    err = tempfile.TemporaryFile()  # read only if the start fails; never fills a pipe
+    cmd = [sys.executable, "-u", "-m", "vlr._meshcat_server", "--host", address,
+           "--parent-pid", str(os.getpid())]
+    proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=err, env=env, bufsize=0, start_new_session=True)
+    urls: dict[str, str] = {}
+    deadline = time.monotonic() + _SERVER_START_S
+    try:
+        while len(urls) < 2:
+            left = deadline - time.monotonic()
+            if left <= 0 or not select.select([proc.stdout], [], [], left)[0]:
+                raise RuntimeError(f"the meshcat server did not start within "
+                                   f"{_SERVER_START_S:.0f} s")
+            line = proc.stdout.readline()  # unbuffered: select sees every line
+            if not line:
+                err.seek(0)
+                tail = err.read().decode(errors="replace").strip()[-2000:]
+                raise RuntimeError(f"the meshcat server exited on start (exit "
+                                   f"{proc.wait(timeout=10)}): {tail}")
+            key, _, value = line.decode(errors="replace").strip().partition("=")
+            if key in ("zmq_url", "web_url"):
+                urls[key] = value
+    except BaseException:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait(timeout=10)
+        proc.stdout.close()
+        err.close()
+        raise
+    proc.stdout.close()  # the server sends nothing more (its stdout is /dev/null now)
+    bound, local = url_host(address), url_host(connect_host(address))
+    web = urls["web_url"].replace(f"//{bound}:", f"//{local}:", 1)
+    return proc, err, urls["zmq_url"], web
+
+
+def _terminate(signum: int, frame: object) -> None:
+    """SIGTERM while a view is open: unwind like Ctrl-C, so that `finally` blocks and
+    `FilterView.close` run (the default action ends the process on the spot). Later ones
+    are ignored: the close path must not be cut short."""
+    signal.signal(signum, signal.SIG_IGN)
+    raise Interrupted(signum)
+
+
 # --------------------------------------------------------------------------- the view
 
 class FilterView:
@@ -161,12 +255,26 @@ class FilterView:
             the hand and object are then drawn where they really are. Drawing only.
         palm_radius, palm_thickness: the palm disc [m] (HandSpec's; None: from the mounts).
         zmq_url: an already running meshcat server (None: start one, and own it).
+        host: the address (or host name) the started server listens on, web page and zmq
+            port both. 127.0.0.1 by default: the page has no authentication, so serving it
+            to the network ("0.0.0.0", an interface's address) is the caller's choice.
+
+    The server started is stopped by `close()` (also at exit), and dies with this process
+    whatever ends it: on Linux the kernel sends it SIGTERM when the thread that opened the
+    view exits (PR_SET_PDEATHSIG; SIGKILL and out-of-memory kills included), elsewhere it
+    notices within a second. While the view is open in the main thread, SIGTERM raises
+    `vlr.errors.Interrupted` (a KeyboardInterrupt) so that the run's `finally` blocks and
+    `close()` run; a SIGTERM handler the program set itself is left alone, and the one found
+    is restored on close.
+
+    Raises:
+        UserError: `host` does not resolve or is not an address of this machine.
     """
 
     def __init__(self, model: HandModel, obj: Any = None, *, sample: int = 1000,
                  seed: int = 0, truth: Callable[[], Any] | None = None,
                  palm_radius: float | None = None, palm_thickness: float = 0.02,
-                 zmq_url: str | None = None) -> None:
+                 zmq_url: str | None = None, host: str = "127.0.0.1") -> None:
         if sample < 1:
             raise ValueError(f"sample {sample} must be >= 1")
         self.model, self.obj, self.sample, self.truth = model, obj, sample, truth
@@ -174,11 +282,36 @@ class FilterView:
         self._last_observation: Any = None
         self._camera_set = False
         self._closed = False
-        self._g = _meshcat().geometry
-        with contextlib.redirect_stdout(io.StringIO()):  # it prints its URL; callers decide
-            self._vis = _meshcat().Visualizer(zmq_url=zmq_url)
+        self._stderr: Any = None
+        self._old_sigterm: Any = None
+        meshcat = _meshcat()
+        self._g = meshcat.geometry
+        if zmq_url is not None:  # join a server someone else runs (and stops)
+            self.host: str | None = None
+            with contextlib.redirect_stdout(io.StringIO()):  # it prints its URL
+                self._vis = meshcat.Visualizer(zmq_url=zmq_url)
+            self._url = self._vis.url()
+        else:
+            self.host = bind_address(host)
+            proc, self._stderr, zmq_url, self._url = _start_server(self.host)
+            try:
+                if ":" in self.host:  # zmq sockets are IPv4-only unless told
+                    import zmq
+
+                    meshcat.visualizer.ViewerWindow.context.setsockopt(zmq.IPV6, 1)
+                with contextlib.redirect_stdout(io.StringIO()):  # it prints the server's URL
+                    window = meshcat.visualizer.ViewerWindow(
+                        zmq_url=zmq_url, start_server=False, server_args=[])
+            except BaseException:
+                proc.kill()
+                proc.wait(timeout=10)
+                self._stderr.close()
+                raise
+            window.server_proc = proc
+            self._vis = meshcat.Visualizer(window=window)
         self._root = self._vis["vlr"]  # everything we draw, in the palm frame
         atexit.register(self.close)  # the server must not outlive us, whatever happens
+        self._catch_sigterm()
         self.iteration: int | None = None
         try:
             self._static_scene(palm_radius, palm_thickness)
@@ -190,8 +323,9 @@ class FilterView:
 
     @property
     def url(self) -> str:
-        """The page to open in a browser."""
-        return self._vis.url()
+        """The page to open in a browser on this machine (a server on every interface is
+        shown at its loopback address)."""
+        return self._url
 
     @property
     def server_process(self) -> subprocess.Popen | None:
@@ -204,6 +338,7 @@ class FilterView:
             return
         self._closed = True
         atexit.unregister(self.close)
+        self._restore_sigterm()
         window = self._vis.window
         sock = getattr(window, "zmq_socket", None)
         if sock is not None:
@@ -212,9 +347,25 @@ class FilterView:
         if proc is not None and proc.poll() is None:
             proc.kill()
             proc.wait(timeout=10)
-        for stream in (getattr(proc, "stdout", None), getattr(proc, "stderr", None)):
+        for stream in (getattr(proc, "stdout", None), getattr(proc, "stderr", None),
+                       self._stderr):
             if stream is not None:
                 stream.close()
+
+    def _catch_sigterm(self) -> None:
+        """SIGTERM -> `Interrupted` while open (see the class), from the main thread only
+        (where Python runs signal handlers) and only over the default action."""
+        if threading.current_thread() is not threading.main_thread():
+            return
+        if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+            self._old_sigterm = signal.signal(signal.SIGTERM, _terminate)
+
+    def _restore_sigterm(self) -> None:
+        old, self._old_sigterm = self._old_sigterm, None
+        if old is None or threading.current_thread() is not threading.main_thread():
+            return
+        if signal.getsignal(signal.SIGTERM) in (_terminate, signal.SIG_IGN):  # still ours
+            signal.signal(signal.SIGTERM, old)
 
     def __enter__(self) -> FilterView:
         return self

@@ -75,7 +75,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", default="runs/identify", help="output folder")
     p.add_argument("--quiet", action="store_true", help="no progress bar")
     p.add_argument("--view", action="store_true", help="serve a live 3D view of the particle "
-                   "filter (meshcat; prints its URL)")
+                   "filter (meshcat; prints its URL; on 127.0.0.1 unless --view-host)")
+    p.add_argument("--view-host", default="127.0.0.1", metavar="HOST",
+                   help="the address the view's server listens on, e.g. 0.0.0.0 to serve it "
+                   "to other machines, without authentication (default 127.0.0.1)")
     p.add_argument("--view-html", metavar="FILE", help="save the final 3D scene as a "
                    "standalone HTML page")
     p.set_defaults(func=run)
@@ -102,13 +105,18 @@ def settings_from_args(args: argparse.Namespace):
 
 def _open_view(args: argparse.Namespace, seed: int, model, hand_spec, obj_spec, truth):
     """The live view (`vlr.view`), only when asked for: meshcat is not even imported else."""
+    import ipaddress
+
     from vlr.view import FilterView
 
     view = FilterView(model, obj=obj_spec, seed=seed, truth=truth,
                       palm_radius=hand_spec.palm_radius,
-                      palm_thickness=hand_spec.palm_thickness)
+                      palm_thickness=hand_spec.palm_thickness, host=args.view_host)
     if args.view:
         print(f"view: {view.url}", flush=True)
+        if not ipaddress.ip_address(view.host).is_loopback:
+            print(f"view: listening on {view.host} (--view-host), reachable from the network "
+                  "with no authentication", flush=True)
     return view
 
 
