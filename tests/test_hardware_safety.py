@@ -182,10 +182,10 @@ def test_a_host_that_stops_talking_leaves_no_motor_holding(tmp_path):
         hand.grasp()
         assert all(emulator.torque().values())
         hand.bus.stop_keepalive()  # the process is gone: nothing talks any more
-        emulator.pass_time(1.9)
+        emulator.pass_time(1.5)
         time.sleep(0.05)
         assert all(emulator.torque().values())  # not yet: 98 x 20 ms = 2 s
-        emulator.pass_time(0.2)
+        emulator.pass_time(0.6)
         assert wait_for(lambda: not any(emulator.torque().values()), 1.0)
         assert {i: emulator.register(i, Reg.BUS_WATCHDOG) for i in IDS} == dict.fromkeys(
             IDS, -1)
