@@ -52,6 +52,13 @@ def _vlr(*args):
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
+def _children(proc):
+    """The sweep's processes, and among them the pool's workers (spawned: `spawn_main`; the
+    others are multiprocessing's resource tracker)."""
+    children = psutil.Process(proc.pid).children(recursive=True)
+    return children, [p for p in children if "spawn_main" in " ".join(p.cmdline())]
+
+
 @pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
 def test_a_signal_stops_a_local_pool_and_resume_finishes_it(pool_sweep, tmp_path, sig, code):
     path, whole = pool_sweep
@@ -61,8 +68,8 @@ def test_a_signal_stops_a_local_pool_and_resume_finishes_it(pool_sweep, tmp_path
     while not list((out / "trials").glob("[!.]*.json")):
         assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
         time.sleep(0.05)
-    workers = psutil.Process(proc.pid).children(recursive=True)
-    assert len(workers) >= 2
+    workers, pool = _children(proc)
+    assert len(pool) == 2
     t0 = time.monotonic()
     os.kill(proc.pid, sig)
     _, err = proc.communicate(timeout=30)
@@ -96,7 +103,8 @@ def test_a_pool_worker_exits_when_its_sweep_is_killed(pool_sweep, tmp_path):
     while not list((out / "trials").glob("[!.]*.json")):
         assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
         time.sleep(0.05)
-    workers = psutil.Process(proc.pid).children(recursive=True)
+    workers, pool = _children(proc)
+    assert len(pool) == 2
     os.kill(proc.pid, signal.SIGKILL)
     proc.communicate(timeout=10)
     _, alive = psutil.wait_procs(workers, timeout=5)
@@ -158,3 +166,23 @@ def test_a_bad_out_is_one_line_before_any_trial(sweep_file, tmp_path, capsys, ma
     assert time.perf_counter() - t0 < 5
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "--out" in err[0] and str(out) in err[0]
+
+
+def test_a_dead_pool_worker_ends_the_sweep_in_one_line(pool_sweep, tmp_path):
+    path, _ = pool_sweep
+    out = tmp_path / "out"
+    proc = _vlr("sweep", str(path), "--out", str(out), "--workers", "2", "--quiet")
+    deadline = time.monotonic() + 60
+    while not list((out / "trials").glob("[!.]*.json")):
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+    workers, pool = _children(proc)
+    os.kill(pool[0].pid, signal.SIGKILL)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 2, err
+    assert err.strip().splitlines()[-1].startswith("vlr sweep: error: a worker of the local "
+                                                   "pool died")
+    _, alive = psutil.wait_procs(workers, timeout=5)
+    assert alive == []
+    done = [p for p in (out / "trials").glob("*.json") if not p.name.startswith(".")]
+    assert all(json.loads(p.read_text())["status"] == "ok" for p in done)

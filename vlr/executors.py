@@ -101,6 +101,7 @@ def run_local(trials: list[Trial], out: Path, workers: int | None, on_done: OnDo
         return
     import multiprocessing
     from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures.process import BrokenProcessPool
 
     threads = max(1, (os.cpu_count() or 1) // workers)
     # spawn, not fork: forking a process whose numba threads already ran is unsafe.
@@ -111,6 +112,12 @@ def run_local(trials: list[Trial], out: Path, workers: int | None, on_done: OnDo
         futures = [pool.submit(run_one, t, out, keep_files) for t in trials]
         for f in as_completed(futures):
             on_done(f.result())
+    except BrokenProcessPool:
+        # The executor fails every trial it held, not just the dead worker's: none of them
+        # is a failed trial, all of them are for --resume.
+        _stop_pool(pool)
+        raise UserError("a worker of the local pool died (killed, or out of memory); the "
+                        "trials not finished run with --resume") from None
     except BaseException:
         _stop_pool(pool)
         raise
