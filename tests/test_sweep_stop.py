@@ -56,7 +56,14 @@ def _children(proc):
     """The sweep's processes, and among them the pool's workers (spawned: `spawn_main`; the
     others are multiprocessing's resource tracker)."""
     children = psutil.Process(proc.pid).children(recursive=True)
-    return children, [p for p in children if "spawn_main" in " ".join(p.cmdline())]
+    return children, [p for p in children if "spawn_main" in " ".join(_cmdline(p))]
+
+
+def _cmdline(p) -> list[str]:
+    try:
+        return p.cmdline()
+    except psutil.Error:   # gone, or a zombie (a short-lived helper process)
+        return []
 
 
 @pytest.mark.parametrize("sig, code", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
@@ -186,3 +193,23 @@ def test_a_dead_pool_worker_ends_the_sweep_in_one_line(pool_sweep, tmp_path):
     assert alive == []
     done = [p for p in (out / "trials").glob("*.json") if not p.name.startswith(".")]
     assert all(json.loads(p.read_text())["status"] == "ok" for p in done)
+
+
+def test_a_signal_stops_vlr_task_seeds_and_its_workers(tmp_path):
+    """`vlr task --seeds --workers 2` runs on the same pool: SIGTERM ends it at once, its
+    workers with it."""
+    proc = _vlr("task", "maze", "--seeds", "0-3", "--workers", "2", "--particles", "300",
+                "--identify-iterations", "2", "--out", str(tmp_path / "out"), "--quiet")
+    deadline = time.monotonic() + 60
+    while len(_children(proc)[1]) < 2:
+        assert proc.poll() is None and time.monotonic() < deadline, proc.communicate()
+        time.sleep(0.05)
+    workers, _ = _children(proc)
+    t0 = time.monotonic()
+    os.kill(proc.pid, signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 143, err
+    assert time.monotonic() - t0 < 10
+    assert err.strip().splitlines()[-1] == "vlr task: interrupted"
+    _, alive = psutil.wait_procs(workers, timeout=5)
+    assert alive == []

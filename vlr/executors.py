@@ -99,9 +99,29 @@ def run_local(trials: list[Trial], out: Path, workers: int | None, on_done: OnDo
         for t in trials:
             on_done(run_one(t, out, keep_files))
         return
-    import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor, as_completed
+    from concurrent.futures import as_completed
     from concurrent.futures.process import BrokenProcessPool
+
+    try:
+        with process_pool(workers) as pool:
+            futures = [pool.submit(run_one, t, out, keep_files) for t in trials]
+            for f in as_completed(futures):
+                on_done(f.result())
+    except BrokenProcessPool:
+        # The executor fails every trial it held, not just the dead worker's: none of them
+        # is a failed trial, all of them are for --resume.
+        raise UserError("a worker of the local pool died (killed, or out of memory); the "
+                        "trials not finished run with --resume") from None
+
+
+@contextlib.contextmanager
+def process_pool(workers: int) -> Iterator[Any]:
+    """A local pool of `workers` spawned processes, each with an equal share of the cores
+    for numba's threads (`_init_worker`), for `vlr sweep` and `vlr task --seeds`. When the
+    block raises (`Interrupted` from `stop_on_signals`, Ctrl-C, a dead worker) the workers
+    are terminated, so that no trial runs on after it."""
+    import multiprocessing
+    from concurrent.futures import ProcessPoolExecutor
 
     threads = max(1, (os.cpu_count() or 1) // workers)
     # spawn, not fork: forking a process whose numba threads already ran is unsafe.
@@ -109,15 +129,7 @@ def run_local(trials: list[Trial], out: Path, workers: int | None, on_done: OnDo
                                initargs=(threads, os.getpid()),
                                mp_context=multiprocessing.get_context("spawn"))
     try:
-        futures = [pool.submit(run_one, t, out, keep_files) for t in trials]
-        for f in as_completed(futures):
-            on_done(f.result())
-    except BrokenProcessPool:
-        # The executor fails every trial it held, not just the dead worker's: none of them
-        # is a failed trial, all of them are for --resume.
-        _stop_pool(pool)
-        raise UserError("a worker of the local pool died (killed, or out of memory); the "
-                        "trials not finished run with --resume") from None
+        yield pool
     except BaseException:
         _stop_pool(pool)
         raise

@@ -400,16 +400,12 @@ def _run_seeds(runs: list[SeedRun], out: Path, workers: int) -> int:
             except Exception as exc:   # noqa: BLE001 - one seed's failure is reported
                 done(job, None, exc)
     else:
-        import multiprocessing
-        from concurrent.futures import ProcessPoolExecutor, as_completed
+        from concurrent.futures import as_completed
 
-        from vlr.executors import _init_worker
+        from vlr.executors import process_pool, stop_on_signals
 
-        threads = max(1, (os.cpu_count() or 1) // workers)
-        # spawn, not fork: forking a process whose numba threads already ran is unsafe.
-        with ProcessPoolExecutor(max_workers=min(workers, len(runs)),
-                                 initializer=_init_worker, initargs=(threads,),
-                                 mp_context=multiprocessing.get_context("spawn")) as pool:
+        # A signal stops every seed at once, its workers with it (vlr.executors).
+        with stop_on_signals(), process_pool(min(workers, len(runs))) as pool:
             futures = {pool.submit(run_seed, job): job for job in runs}
             for f in as_completed(futures):
                 exc = f.exception()
