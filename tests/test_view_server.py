@@ -75,7 +75,9 @@ def test_server_listens_on_loopback_only_and_catches_sigterm_while_open():
 def test_view_host_opts_in_to_the_network():
     with FilterView(_model(), host="0.0.0.0") as v:
         listening = _listening(v.server_process.pid)
-        assert len(listening) == 2 and {ip for ip, _ in listening} == {"0.0.0.0"}, listening
+        # The page on every interface; meshcat's drawing channel (zmq) still on loopback.
+        assert sorted(ip for ip, _ in listening) == ["0.0.0.0", "127.0.0.1"], listening
+        assert _web_port(v) in {port for ip, port in listening if ip == "0.0.0.0"}
         assert v.url.startswith("http://127.0.0.1:")  # where this machine's browser finds it
         outside = _external_address()
         if outside is not None:
@@ -97,7 +99,7 @@ def test_identify_view_host_flag_reaches_the_server(tmp_path, monkeypatch, capsy
                "0.0.0.0"])
     assert rc == 0
     (view, listening), = views
-    assert {ip for ip, _ in listening} == {"0.0.0.0"} and view.server_process.poll() is not None
+    assert "0.0.0.0" in {ip for ip, _ in listening} and view.server_process.poll() is not None
     out = capsys.readouterr().out
     assert f"view: {view.url}" in out and "reachable from the network" in out
 

@@ -5,7 +5,8 @@ meshcat 0.3.2's server (`python -m meshcat.servers.zmqserver`) binds its zmq soc
 127.0.0.1 but lets tornado listen on every interface (`app.listen(port)` without an
 address), unauthenticated, and has no option to change either; it also runs on after its
 parent dies (it is started in a session of its own). This module runs the same
-`ZMQWebSocketBridge` with the web port and the zmq port both on `--host`, and exits when
+`ZMQWebSocketBridge` with the web page on `--host` and the zmq port (meshcat's unauthenticated
+drawing commands) always on the loopback of that address's family, and exits when
 its parent does: at once on Linux (PR_SET_PDEATHSIG), within a second elsewhere (the parent
 pid is polled).
 
@@ -33,6 +34,11 @@ def connect_host(address: str) -> str:
     """The address a local client connects to for a server bound to `address`: a wildcard
     bind is reached on the loopback of its family."""
     return {"0.0.0.0": "127.0.0.1", "::": "::1"}.get(address, address)
+
+
+def loopback(address: str) -> str:
+    """The loopback address of `address`'s family, where the zmq port is bound."""
+    return "::1" if ":" in address else "127.0.0.1"
 
 
 def url_host(address: str) -> str:
@@ -69,7 +75,8 @@ def _bridge_class() -> Any:
 
     class Bridge(ZMQWebSocketBridge):
         """meshcat's bridge with tornado listening on `address` only (meshcat passes no
-        address to `app.listen`) and zmq on the same address, IPv6 included."""
+        address to `app.listen`) and zmq on the loopback, IPv6 included: the page may be
+        served to the network, the channel that draws in it never is."""
 
         def __init__(self, address: str) -> None:
             self.address = address  # before the base __init__, which calls make_app
@@ -82,6 +89,7 @@ def _bridge_class() -> Any:
             return app
 
         def setup_zmq(self, url: str) -> Any:
+            url = url.replace(url_host(self.address), url_host(loopback(self.address)), 1)
             sock = self.context.socket(zmq.REP)
             if ":" in self.address:
                 sock.setsockopt(zmq.IPV6, 1)
@@ -103,7 +111,7 @@ def serve(address: str, parent: int) -> None:
 
     bridge = _bridge_class()(address)
     port = int(bridge.zmq_url.rsplit(":", 1)[1])
-    print(f"zmq_url=tcp://{url_host(connect_host(address))}:{port}")
+    print(f"zmq_url=tcp://{url_host(loopback(address))}:{port}")
     print(f"web_url={bridge.web_url}", flush=True)
     # Nobody reads our output after this: keep later prints from filling the pipe.
     devnull = os.open(os.devnull, os.O_WRONLY)
