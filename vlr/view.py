@@ -255,8 +255,9 @@ class FilterView:
             the hand and object are then drawn where they really are. Drawing only.
         palm_radius, palm_thickness: the palm disc [m] (HandSpec's; None: from the mounts).
         zmq_url: an already running meshcat server (None: start one, and own it).
-        host: the address (or host name) the started server listens on, web page and zmq
-            port both. 127.0.0.1 by default: the page has no authentication, so serving it
+        host: the address (or host name) the started server's web page listens on (its
+            zmq port stays on the loopback). 127.0.0.1 by default: the page has no
+            authentication, so serving it
             to the network ("0.0.0.0", an interface's address) is the caller's choice.
 
     The server started is stopped by `close()` (also at exit), and dies with this process
