@@ -27,7 +27,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ("README.md", *sorted(f"docs/{p.name}" for p in (ROOT / "docs").glob("*.md")),
         "hardware/README.md", "models/README.md")
-PROGRAMS = ("vlr", "python", "make", "export")
+PROGRAMS = ("vlr", "python", "make", "for")
 TIMEOUT_S = 600
 
 # What cannot run here, with why; everything else must.
@@ -60,8 +60,9 @@ class Shown:
 
 def _shell_commands(block: str, first_line: int, where: str) -> list[Shown]:
     """The commands of a shell block: continuation lines joined, comments and output lines
-    (starting with `#`) dropped, a quoted string spanning lines kept whole."""
-    out, pending, start = [], "", 0
+    (starting with `#`) dropped, a quoted string spanning lines kept whole; an `export`
+    goes before every later command of its block."""
+    out, pending, start, exports = [], "", 0, ""
     for i, line in enumerate(block.splitlines()):
         if not pending:
             if not line.strip() or line.lstrip().startswith("#"):
@@ -74,8 +75,11 @@ def _shell_commands(block: str, first_line: int, where: str) -> list[Shown]:
             words = shlex.split(pending, comments=True)
         except ValueError:          # an open quote: the command goes on
             continue
-        if words and words[0] in PROGRAMS:
-            out.append(Shown(f"{where}:{first_line + start}", "shell", pending.strip()))
+        if words and words[0] == "export":
+            exports += pending
+        elif words and words[0] in PROGRAMS:
+            out.append(Shown(f"{where}:{first_line + start}", "shell",
+                             exports + pending.strip()))
         pending = ""
     assert not pending, f"{where}: an unfinished command: {pending!r}"
     return out
@@ -186,3 +190,6 @@ def test_every_doc_command_is_found():
                for t in texts)
     assert any(t.startswith("python -c") and "ray.shutdown()" in t for t in texts)
     assert any(c.file.startswith("my_policy.py") for c in COMMANDS)
+    # A loop runs whole, after the `export` of its block.
+    assert any(t.startswith("export NUMBA_CACHE_DIR") and "for i in 1 2; do" in t
+               for t in texts)
