@@ -302,12 +302,16 @@ def parse_assignment(text: str) -> tuple[str, Any]:
     `--set` and a sweep file read alike."""
     import yaml
 
+    from vlr.spec import DuplicateKeyError, safe_load_yaml, yaml_error_line
+
     key, sep, raw = text.partition("=")
     key = key.strip()
     if not sep or not key:
         raise UserError(f"--set {text!r}: use KEY=VALUE, e.g. filter.particles=6000")
     try:
-        value = yaml.safe_load(raw) if raw.strip() else None
+        value = safe_load_yaml(raw) if raw.strip() else None
+    except DuplicateKeyError as exc:
+        raise UserError(f"--set {text!r}: {yaml_error_line(exc)}") from None
     except yaml.YAMLError:
         value = raw
     if isinstance(value, str) and value.lower() == "none":
@@ -324,18 +328,12 @@ def settings_help(settings: Settings | None = None) -> str:
 
 def read_yaml_mapping(path, what: str) -> dict:
     """The YAML mapping in `path` (a settings or sweep file), or one UserError naming `what`
-    and the file: missing, not YAML, or not a mapping."""
+    and the file: missing, a folder, not UTF-8, not YAML, a key given twice, or not a
+    mapping (`vlr.spec.load_yaml_mapping`, the reader of every user's YAML)."""
     from pathlib import Path
 
-    import yaml
+    from vlr.spec import load_yaml_mapping
 
-    where = f"{what} {str(path)!r}"
-    try:
-        raw = yaml.safe_load(Path(path).read_text())
-    except FileNotFoundError:
-        raise UserError(f"{where}: no such file") from None
-    except yaml.YAMLError as exc:
-        raise UserError(f"{where} is not valid YAML: {exc}") from None
-    if not isinstance(raw, dict):
-        raise UserError(f"{where} must be a mapping")
-    return raw
+    if not Path(path).exists():
+        raise UserError(f"{what} {str(path)!r}: no such file")
+    return load_yaml_mapping(path, what, UserError)

@@ -50,6 +50,9 @@ __all__ = [
     "available_objects",
     "available_fingers",
     "load_yaml_mapping",
+    "safe_load_yaml",
+    "yaml_error_line",
+    "DuplicateKeyError",
 ]
 
 
@@ -233,19 +236,72 @@ def _require(ok: bool, message: str) -> None:
 
 # --------------------------------------------------------------------------- YAML loading
 
+class DuplicateKeyError(yaml.constructor.ConstructorError):
+    """A YAML mapping gives one key twice: PyYAML keeps the last value without a word, and
+    a user who wrote `particles:` twice meant one of them."""
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """`yaml.SafeLoader` that refuses a mapping with a duplicated key (DuplicateKeyError,
+    naming the key and both lines). Merge keys (`<<: *base`) may still be overridden."""
+
+    def construct_mapping(self, node: yaml.Node, deep: bool = False) -> dict:
+        if isinstance(node, yaml.MappingNode):
+            first_line: dict[Any, int] = {}
+            for key_node, _ in node.value:
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    continue
+                key = self.construct_object(key_node, deep=True)
+                try:
+                    seen = first_line.get(key)
+                except TypeError:  # an unhashable key; SafeLoader refuses it itself
+                    continue
+                line = key_node.start_mark.line + 1
+                if seen is not None:
+                    raise DuplicateKeyError(
+                        None, None, f"duplicate key {key!r} on line {line} (first on line "
+                        f"{seen})", key_node.start_mark)
+                first_line[key] = line
+        return super().construct_mapping(node, deep=deep)
+
+
+def safe_load_yaml(text: str) -> Any:
+    """`yaml.safe_load` of a user's YAML, refusing a duplicated key (DuplicateKeyError):
+    every settings file, sweep file, spec and hardware config is read through it."""
+    return yaml.load(text, Loader=_UniqueKeyLoader)  # noqa: S506 (a SafeLoader)
+
+
+def yaml_error_line(exc: yaml.YAMLError) -> str:
+    """`exc` on one line: PyYAML's own text spans several (the marks, a snippet)."""
+    if isinstance(exc, DuplicateKeyError):
+        return str(exc.problem)
+    if isinstance(exc, yaml.MarkedYAMLError):
+        mark = exc.problem_mark or exc.context_mark
+        what = " ".join(str(t) for t in (exc.context, exc.problem) if t)
+        if mark is not None:
+            what += f" (line {mark.line + 1}, column {mark.column + 1})"
+        return what
+    return " ".join(str(exc).split())
+
+
 def load_yaml_mapping(path: str | Path, what: str,
                       error: type[Exception] = SpecError) -> dict[str, Any]:
     """The mapping in YAML file `path`, or `error` naming `what` ("spec file", ...) and the
-    path: missing, unreadable, not YAML, or not a mapping. Shared by every YAML loader."""
+    path: missing, a folder, unreadable, not UTF-8, not YAML, a key given twice, or not a
+    mapping. Shared by every YAML loader."""
     path = Path(path)
     if not path.is_file():
         raise error(f"{what} {path} {'is not a file' if path.exists() else 'does not exist'}")
     try:
-        data = yaml.safe_load(path.read_text())
+        data = safe_load_yaml(path.read_text(encoding="utf-8"))
+    except DuplicateKeyError as exc:
+        raise error(f"{what} {path}: {yaml_error_line(exc)}") from None
     except yaml.YAMLError as exc:
-        raise error(f"{what} {path} is not valid YAML: {exc}") from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise error(f"{what} {path} cannot be read: {exc}") from None
+        raise error(f"{what} {path} is not valid YAML: {yaml_error_line(exc)}") from None
+    except UnicodeDecodeError as exc:
+        raise error(f"{what} {path} is not UTF-8 text (byte {exc.start})") from None
+    except OSError as exc:
+        raise error(f"{what} {path} cannot be read: {exc.strerror or exc}") from None
     if not isinstance(data, dict):
         raise error(f"{what} {path} must hold a mapping, got {type(data).__name__}")
     return data
