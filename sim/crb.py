@@ -24,8 +24,9 @@ from typing import Any
 import numpy as np
 
 from vlr.errors import UserError
-from vlr.explore import ExplorationRange, random_action
+from vlr.explore import ActionStream
 from vlr.hand import GraspError, report_commands
+from vlr.io import check_output_file
 
 __all__ = ["CrbSettings", "crb_report", "format_report", "register", "CAMERA_SIGMA"]
 
@@ -170,10 +171,7 @@ def crb_report(s: CrbSettings) -> dict:
                             "curvature the sim does not know; the bound needs its true value")
         trace = InformationTrace(pf, truth_vector(pf, truth), truth.position, truth.rotation,
                                  u, s.relative_step)
-        rng = np.random.default_rng(ts.seed + 1)  # vlr identify's action stream
-        lo, hi = (v * 1e-3 for v in ts.loop.action_range_mm)
-        explore = ExplorationRange(lo, hi, max(ts.loop.action_band_mm * 1e-3, hi))
-        center = u.copy()
+        actions = ActionStream.of_trial(ts.loop, ts.seed, u)  # vlr identify's actions
         rows = [_row(trace, sigma, camera)]
         scale_at_budget = None
         lost = None
@@ -181,9 +179,9 @@ def crb_report(s: CrbSettings) -> dict:
             if s.replay:
                 delta = np.asarray(s.replay[k]) - u
             elif s.candidates:
-                delta = _oracle(trace, rng, u, center, explore, s.candidates, sigma)
+                delta = _oracle(trace, actions, u, s.candidates, sigma)
             else:
-                delta = random_action(rng, u, center, explore)
+                delta = actions.random(u)
             try:
                 report = world.world.apply(delta)
             except GraspError:  # the synthetic world refuses a snap-through
@@ -238,10 +236,10 @@ def _row(trace, sigma, camera) -> dict:
             "unknown_std": b.unknown_std.tolist()}
 
 
-def _oracle(trace, rng, u, center, explore, k: int, sigma) -> np.ndarray:
+def _oracle(trace, actions: ActionStream, u, k: int, sigma) -> np.ndarray:
     """Of k random candidates, the one whose bound after it is narrowest (first if every
     preview fails)."""
-    cands = [random_action(rng, u, center, explore) for _ in range(k)]
+    cands = [actions.random(u) for _ in range(k)]
     best, best_w = cands[0], math.inf
     for d in cands:
         b = trace.preview(u + d, *sigma)
@@ -402,12 +400,11 @@ def _replays(args: argparse.Namespace) -> list[tuple[str, Any, tuple]]:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from pathlib import Path
 
     from vlr.io import write_json_atomic
 
-    if args.json and not Path(args.json).resolve().parent.is_dir():
-        raise UserError(f"--json {args.json}: its folder does not exist")
+    if args.json:
+        check_output_file(args.json, "--json")
     if args.replay:
         if args.sweep:
             raise UserError("give --sweep or --replay, not both")

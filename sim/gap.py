@@ -43,7 +43,8 @@ import numpy as np
 from sim.gap_fit import profile_unknown
 from sim.pads import SLIDE_FRICTION, TORSION_FRICTION
 from vlr.errors import UserError
-from vlr.explore import ExplorationRange, random_action
+from vlr.explore import ActionStream
+from vlr.identify import LoopConfig
 from vlr.kinematics import HandModel
 from vlr.motion import (
     STATUS,
@@ -84,7 +85,8 @@ class GapSettings:
         seed: seeds the random actions (the same actions as `vlr identify --seed`).
         actions: random actions to make.
         drift_actions: actions predicted open loop for the drift (the first ones).
-        action_range: |tendon change| range [m]; band: commands stay this close to the grasp.
+        loop: the loop's settings, whose exploratory actions these are (the action range
+            and band; `vlr.explore.ActionStream`, the stream of `vlr identify`).
         motion: the model's settings (`vlr.motion.MotionConfig`; each rung switches its
             terms and rolling); None: the sim identification's own (the sim backend's
             defaults, `vlr.settings.load_settings`).
@@ -110,8 +112,7 @@ class GapSettings:
     seed: int = 0
     actions: int = 30
     drift_actions: int = 15
-    action_range: tuple[float, float] = (0.2e-3, 0.4e-3)
-    band: float = 0.4e-3
+    loop: LoopConfig = LoopConfig()
     motion: MotionConfig | None = None
     friction: PadFriction = PadFriction(slide=SLIDE_FRICTION, spin=TORSION_FRICTION)
     start: str = "settle"
@@ -149,10 +150,6 @@ class GapSettings:
             raise UserError(f"actions {self.actions!r} must be an integer >= 1")
         if not isinstance(self.drift_actions, int) or self.drift_actions < 1:
             raise UserError(f"drift actions {self.drift_actions!r} must be an integer >= 1")
-        lo, hi = self.action_range
-        if not (0 < lo <= hi <= 2e-3):
-            raise UserError(f"action range ({lo}, {hi}) m must satisfy 0 < low <= high <= "
-                            "0.002 (the sim refuses larger moves)")
 
 
 @dataclass(frozen=True)
@@ -184,13 +181,10 @@ def record_actions(settings: GapSettings) -> Recording:
         grasp = hand.grasp()
         commands, tensions = [grasp.commands], [grasp.tensions]
         truths, forces = [hand.scoring_truth()], [pad_forces(hand)]
-        rng = np.random.default_rng(settings.seed + 1)  # vlr identify's action stream
-        explore = ExplorationRange(settings.action_range[0], settings.action_range[1],
-                                   max(settings.band, settings.action_range[1]))
-        center = commands[0].copy()
+        actions = ActionStream.of_trial(settings.loop, settings.seed, commands[0])
         dropped = None
         for k in range(1, settings.actions + 1):
-            report = hand.apply(random_action(rng, commands[-1], center, explore))
+            report = hand.apply(actions.random(commands[-1]))
             t = hand.scoring_truth()
             if not report.grasp_held or not np.isfinite(t.normals).all():
                 dropped = k

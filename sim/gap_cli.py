@@ -11,7 +11,6 @@ import csv
 import io
 import math
 from dataclasses import replace
-from pathlib import Path
 
 from sim.gap import FILTER_RUNG, OBJECTS, STARTS, GapSettings, format_report, gap_report
 from vlr.errors import UserError
@@ -97,21 +96,23 @@ def _settings(args: argparse.Namespace) -> GapSettings:
     from vlr.settings import load_settings, parse_assignment
 
     sets = dict(parse_assignment(t) for t in args.set)
-    bad = [k for k in sets if not k.startswith(("filter.motion.", "world.options.ramp_time"))]
+    bad = [k for k in sets if not k.startswith(("filter.motion.", "world.options.ramp_time",
+                                                "loop.action_range_mm", "loop.action_band_mm"))]
     if bad:
-        raise UserError(f"--set {bad[0]}: vlr gap takes filter.motion.* and "
-                        "world.options.ramp_time")
+        raise UserError(f"--set {bad[0]}: vlr gap takes filter.motion.*, "
+                        "world.options.ramp_time and loop.action_range_mm / action_band_mm")
     tree = load_settings({"world.backend": "sim"}, sets)
     ramp = tree.world.options.get("ramp_time", SimWorldOptions.ramp_time)
     return GapSettings(actions=smoke.cap(args.actions, smoke.ACTIONS),
                        drift_actions=smoke.cap(args.drift_actions, smoke.ACTIONS),
-                       motion=tree.filter.motion, start=args.start, ramp_time=ramp,
+                       motion=tree.filter.motion, loop=tree.loop, start=args.start,
+                       ramp_time=ramp,
                        fit=args.fit, fit_range=args.fit_range, fit_points=args.fit_points,
                        fit_turn_deg=args.fit_turn_deg)
 
 
 def run(args: argparse.Namespace) -> int:
-    from vlr.io import write_json_atomic, write_text_atomic
+    from vlr.io import check_output_file, write_json_atomic, write_text_atomic
     from vlr.sweep import parse_seeds
 
     names = OBJECTS if args.object == "all" else tuple(
@@ -120,8 +121,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--object {args.object!r} names no object")
     for flag in ("json", "csv"):
         path = getattr(args, flag)
-        if path and not Path(path).resolve().parent.is_dir():
-            raise UserError(f"--{flag} {path}: its folder does not exist")
+        if path:
+            check_output_file(path, f"--{flag}")
     seeds = parse_seeds(args.seeds)
     base = _settings(args)
     reports = []

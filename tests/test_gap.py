@@ -100,7 +100,7 @@ def test_gap_cli_writes_json(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("kw", [dict(actions=0), dict(drift_actions=0),
-                                dict(action_range=(0.0, 3e-3)), dict(ramp_time=0.0),
+                                dict(ramp_time=0.0),
                                 dict(ramp_time=float("nan")), dict(ramp_time=True),
                                 dict(fit_points=1), dict(start="warm")])
 def test_bad_gap_settings_are_named(kw):
@@ -120,8 +120,9 @@ def test_the_gap_defaults_to_the_sim_identifications_model_and_ramp():
 
 
 def test_gap_cli_bad_json_folder(tmp_path, capsys):
-    assert main(["gap", "--json", str(tmp_path / "missing" / "g.json")]) == 2
-    assert "folder does not exist" in capsys.readouterr().err
+    (tmp_path / "taken").write_text("")
+    assert main(["gap", "--json", str(tmp_path / "taken" / "g.json")]) == 2
+    assert "taken is a file, not a folder" in capsys.readouterr().err
 
 
 def test_a_hand_without_a_thumb_has_no_turn_split():

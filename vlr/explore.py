@@ -9,8 +9,12 @@ slackens a tendon nor crushes the object: a step that would leave the band is mi
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from vlr.identify import LoopConfig
 
 
 @dataclass(frozen=True)
@@ -48,3 +52,29 @@ def random_action(rng: np.random.Generator, commands: np.ndarray, center: np.nda
     out = np.abs(commands + delta - center) > rng_range.band
     delta[out] = -delta[out]
     return delta
+
+
+@dataclass
+class ActionStream:
+    """The exploratory actions of one trial, as `vlr identify` makes them: a generator
+    seeded by the trial's `seed + 1` (the filter draws from `seed`), the magnitudes and the
+    band of the loop's settings (`loop.action_range_mm`, `loop.action_band_mm`), the band
+    about the grasp command. `vlr crb`, `vlr gap` and `vlr bench` take their actions from
+    this too, so that one seed means the same actions in each."""
+
+    rng: np.random.Generator
+    explore: ExplorationRange
+    center: np.ndarray
+
+    @classmethod
+    def of_trial(cls, loop: LoopConfig, seed: int, grasp_commands: np.ndarray) -> ActionStream:
+        """The stream of the trial with these loop settings and seed, grasped at
+        `grasp_commands` [m]."""
+        lo, hi = (v * 1e-3 for v in loop.action_range_mm)
+        return cls(np.random.default_rng(seed + 1),
+                   ExplorationRange(low=lo, high=hi, band=max(loop.action_band_mm * 1e-3, hi)),
+                   np.array(grasp_commands, dtype=float))
+
+    def random(self, commands: np.ndarray) -> np.ndarray:
+        """The next random action from `commands` (`random_action`)."""
+        return random_action(self.rng, commands, self.center, self.explore)

@@ -23,7 +23,7 @@ import numpy as np
 
 from vlr.active import ActiveExploration, choose_action
 from vlr.errors import UserError
-from vlr.explore import ExplorationRange, random_action
+from vlr.explore import ActionStream
 from vlr.filter import FilterConfig, GraspFilter, IterationRecord, ParticleFilter
 from vlr.hand import GraspError, report_commands
 from vlr.kinematics import HandModel, contact_in_distal, normals_from_angles
@@ -229,7 +229,6 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
 
         check_estimator(filter_config, cfg.exploration)
     pf = make_filter(model, obj, filter_config, seed)
-    action_rng = np.random.default_rng(seed + 1)
     report = world.grasp()
     u = report_commands(report)
     weigh_tensions = pf.obs_model.sigma_tension > 0
@@ -237,9 +236,7 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
         raise UserError("the likelihood weighs tendon tensions (sigma_tension), and this "
                         "hand does not report them: set it to 0")
     tensions = getattr(report, "tensions", None)
-    center = u.copy()
-    lo, hi = (v * 1e-3 for v in cfg.action_range_mm)
-    explore = ExplorationRange(low=lo, high=hi, band=max(cfg.action_band_mm * 1e-3, hi))
+    actions = ActionStream.of_trial(cfg, seed, u)
     obs = observer()
     tries = 1
     while obs is None:  # the filter needs one pose to anchor its particles
@@ -275,9 +272,10 @@ def identify(world: ActingWorld, observer: Callable[[], PoseObservation | None],
             break
         it += 1
         if cfg.exploration == "active":
-            delta = choose_action(pf, action_rng, u, center, explore, cfg.active)
+            delta = choose_action(pf, actions.rng, u, actions.center, actions.explore,
+                                  cfg.active)
         else:
-            delta = random_action(action_rng, u, center, explore)
+            delta = actions.random(u)
         report = world.apply(delta)
         if not getattr(report, "grasp_held", True):
             # The fingertips no longer hold the object: the VLR's rigid grasp (Eq. 8) does

@@ -63,7 +63,9 @@ def yardstick(n_particles: int, repeats: int = 5, seed: int = 0) -> float:
 
 def _filter(n_particles: int, seed: int, contacts: str):
     """The filter as `vlr identify` builds it on the sim, initialised on the synthetic world
-    holding the apple, and that world."""
+    holding the apple, that world, and the trial's actions (`vlr.explore.ActionStream`, as
+    `vlr identify --seed` makes them)."""
+    from vlr.explore import ActionStream
     from vlr.filter import ParticleFilter
     from vlr.kinematics import HandModel
     from vlr.motion import ObjectParams
@@ -84,20 +86,18 @@ def _filter(n_particles: int, seed: int, contacts: str):
     nominal = grasp_guess(settings, model, obj)
     pf = ParticleFilter(model, obj, settings.filter, seed)
     pf.initialize(world.observe(), u, nominal.theta, nominal.contact)
-    return pf, world
+    return pf, world, ActionStream.of_trial(settings.loop, seed, u)
 
 
 def bench_one(n_particles: int, repeats: int, seed: int = 0, contacts: str = "rolling",
               profile: bool = False) -> dict[str, float]:
     """Median seconds per phase of `repeats` filter iterations with n_particles, the Newton
     iterations, and with `profile` the iterations' spread and the failures."""
-    from vlr.synthetic import random_action
-
-    pf, world = _filter(n_particles, seed, contacts)
-    rng = np.random.default_rng(seed + 1)
+    pf, world, actions = _filter(n_particles, seed, contacts)
+    u = actions.center
     rows = []
     for _ in range(repeats + 1):  # the first iteration also settles the prior: not timed
-        u = world.apply(random_action(rng, pf.model.n_fingers))
+        u = world.apply(actions.random(u))
         obs = world.observe()
         t0 = time.perf_counter()
         pf.step(u, obs)
@@ -122,7 +122,7 @@ def term_costs(n_particles: int, seed: int = 0, repeats: int = 5) -> dict[str, f
     from vlr import _energy_kernels as kern
     from vlr.motion import TERMS
 
-    pf, _ = _filter(min(n_particles, 6_000), seed, "rolling")
+    pf, _, _ = _filter(min(n_particles, 6_000), seed, "rolling")
     m = pf.motion
     st = pf.state.take(np.resize(np.arange(pf.state.n), n_particles))  # n_particles of them
     roll = m.rolling_frames(st, forces=False)
@@ -164,7 +164,10 @@ def run(args: argparse.Namespace) -> int:
     numba.set_num_threads(args.threads or cores)
     from vlr import smoke
     from vlr._energy_kernels import solve_path_batch  # noqa: F401  (compile/load the cache)
-    from vlr.io import write_json_atomic
+    from vlr.io import check_output_file, write_json_atomic
+
+    if args.json is not None:
+        check_output_file(args.json, "--json")
 
     results: dict[int, dict[str, float]] = {}
     print(f"{args.contacts} contacts, the synthetic world holding the apple, the sim's "
