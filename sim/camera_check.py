@@ -12,13 +12,13 @@ import argparse
 import math
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from scipy.spatial.transform import Rotation
 
 from vlr.errors import UserError
 from vlr.explore import ExplorationRange, random_action
+from vlr.io import check_output_file
 from vlr.perception import observe
 
 
@@ -133,8 +133,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--actions {args.actions} must be >= 0")
     if not math.isfinite(args.noise) or args.noise < 0:
         raise UserError(f"--noise {args.noise} must be a finite number >= 0")
-    if args.json and not Path(args.json).resolve().parent.is_dir():
-        raise UserError(f"--json {args.json}: its folder does not exist")
+    if args.json:
+        check_output_file(args.json, "--json")
     objects = [o.strip() for o in args.objects.split(",") if o.strip()]
     if not objects:
         raise UserError(f"--objects {args.objects!r} names no object")

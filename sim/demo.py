@@ -56,11 +56,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from vlr.io import check_output_dir
     from vlr.run import run_identification
     from vlr.settings import load_settings
 
     if args.actions < 0:
         raise UserError(f"--actions {args.actions} must be >= 0")
+    if args.out:
+        check_output_dir(args.out)
     settings = load_settings({"world.backend": "sim", "world.object": args.object,
                               "world.hand": args.hand, "filter.particles": args.particles,
                               "loop.max_iterations": args.actions, "seed": args.seed})

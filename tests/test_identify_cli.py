@@ -333,3 +333,54 @@ def test_identify_says_when_the_grasp_prior_missed_the_truth(tmp_path, capsys):
     off = json.loads((tmp_path / "off" / "result.json").read_text())
     assert off["prior_coverage"] <= 0.5
     assert "missed the grasp" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("where", ["a file", "under a file"])
+def test_a_bad_out_is_one_line_before_the_run(tmp_path, capsys, monkeypatch, where):
+    import vlr.run
+
+    def never(*a, **k):
+        raise AssertionError("the identification ran")
+
+    monkeypatch.setattr(vlr.run, "run_identification", never)
+    blocker = tmp_path / "taken"
+    blocker.write_text("")
+    out = blocker if where == "a file" else blocker / "sub"
+    rc = main(["identify", "--backend", "synthetic", "--out", str(out), "--quiet"])
+    assert rc == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--out" in err[0] and "is a file" in err[0], err
+
+
+@pytest.mark.parametrize("content", [None, b"\xff\xfe seeds", b"seed: 1\nseed: 2\n"],
+                         ids=["a folder", "not UTF-8", "a key twice"])
+def test_a_bad_settings_file_is_one_line(tmp_path, capsys, content):
+    path = tmp_path / "settings.yaml"
+    if content is None:
+        path.mkdir()
+    else:
+        path.write_bytes(content)
+    rc = main(["identify", "--backend", "synthetic", "--settings", str(path), "--out",
+               str(tmp_path / "o"), "--quiet"])
+    assert rc == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and str(path) in err[0], err
+    assert not (tmp_path / "o" / "result.json").exists()
+
+
+def test_a_run_killed_while_writing_leaves_no_finished_folder(tmp_path, monkeypatch):
+    """result.json marks a finished run: a rerun into the folder removes the old one first
+    and writes its own last, so a kill between the files leaves no result.json."""
+    import vlr.results
+
+    args = ["identify", "--backend", "synthetic", "--particles", "200", "--max-iterations",
+            "1", "--quiet", "--out", str(tmp_path)]
+    assert main(args) == 0
+    assert (tmp_path / "result.json").exists()
+
+    def killed(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(vlr.results, "_plot", killed)   # after history.npz, before the rest
+    assert main(args) == 130
+    assert (tmp_path / "history.npz").exists() and not (tmp_path / "result.json").exists()

@@ -182,8 +182,9 @@ def test_crb_sweep_skips_a_trial_it_cannot_linearise(tmp_path, capsys, monkeypat
 
 
 def test_crb_cli_bad_json_folder(tmp_path, capsys):
-    assert main(["crb", "--json", str(tmp_path / "missing" / "c.json")]) == 2
-    assert "folder does not exist" in capsys.readouterr().err
+    (tmp_path / "taken").write_text("")
+    assert main(["crb", "--json", str(tmp_path / "taken" / "c.json")]) == 2
+    assert "taken is a file, not a folder" in capsys.readouterr().err
 
 
 def test_crb_needs_a_world_with_truth():

@@ -9,6 +9,7 @@ and mkstemp's 0600 would hide them on a shared filesystem.
 from __future__ import annotations
 
 import builtins
+import contextlib
 import json
 import os
 import select
@@ -58,7 +59,9 @@ def atomic_path(path: str | Path) -> Iterator[Path]:
 def _dir_problem(path: Path) -> str | None:
     """Why `path` cannot be used as a folder to write in, or None: it is created if
     missing and a probe file written and removed in it, which finds every way it can fail
-    (a file there or above it, no permission, a read-only filesystem) as the run would."""
+    (a file there or above it, no permission, a read-only filesystem) as the run would;
+    the folders it created are removed again, so that a run refused later for another
+    reason leaves nothing behind."""
     if path.exists() and not path.is_dir():
         return "is a file, not a folder"
     for parent in path.parents:
@@ -66,6 +69,7 @@ def _dir_problem(path: Path) -> str | None:
             if not parent.is_dir():
                 return f"{parent} is a file, not a folder"
             break
+    created = [p for p in (path, *path.parents) if not p.exists()]
     try:
         path.mkdir(parents=True, exist_ok=True)
         fd, probe = tempfile.mkstemp(prefix=".probe.tmp-", dir=path)
@@ -73,6 +77,10 @@ def _dir_problem(path: Path) -> str | None:
         os.unlink(probe)
     except OSError as e:
         return f"cannot write there ({e.strerror or e})"
+    finally:
+        for folder in created:  # deepest first
+            with contextlib.suppress(OSError):
+                folder.rmdir()
     return None
 
 

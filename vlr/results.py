@@ -143,10 +143,13 @@ def _errors(err: np.ndarray, unknown_error: dict[str, float], model) -> dict:
 
 
 def write_outputs(out: Path, result, summary: dict, model, truths: list | None = None) -> None:
-    """result.json, history.npz and convergence.png, each written atomically."""
+    """result.json, history.npz and convergence.png, each written atomically. A previous
+    run's result.json, the mark of a finished run, is removed first and the new one written
+    last: a run killed while writing leaves no folder that looks finished."""
     from vlr.io import atomic_path, write_json_atomic
 
     out.mkdir(parents=True, exist_ok=True)
+    (out / "result.json").unlink(missing_ok=True)
     n, k = model.n_fingers, model.n_joints
     post = [r.posterior or r.prior for r in result.history]
     hist = {"iteration": np.array([r.iteration for r in result.history]),

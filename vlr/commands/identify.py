@@ -12,7 +12,6 @@ anything unless asked for.
 from __future__ import annotations
 
 import argparse
-from pathlib import Path
 
 import numpy as np
 
@@ -130,11 +129,15 @@ def _finish_view(view, args: argparse.Namespace) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
+    from vlr.io import check_output_dir, check_output_file
     from vlr.plots import CloudRecorder, particle_cloud
     from vlr.run import run_identification
 
     settings = settings_from_args(args)
-    out = Path(args.out)
+    # A bad --out or --view-html is one line now, not a traceback after the whole run.
+    out = check_output_dir(args.out)
+    if args.view_html:
+        check_output_file(args.view_html, "--view-html")
     seed = settings.seed
     bar = None
     total = settings.loop.max_iterations
@@ -143,12 +146,10 @@ def run(args: argparse.Namespace) -> int:
         # The bar starts with the filter, so that a world that fails to open (a bad
         # hardware config) prints its one-line error alone.
         nonlocal bar
-        if args.quiet:
-            return
         if bar is None:
-            from tqdm import tqdm
+            from vlr.logs import progress_bar
 
-            bar = tqdm(total=total, desc="identify", unit="it")
+            bar = progress_bar(args.quiet, total=total, desc="identify", unit="it")
         bar.set_postfix(ci_deg=f"{rec.ci_deg:.2f}", ess=f"{rec.ess:.0f}")
         if rec.iteration:
             bar.update(1)
