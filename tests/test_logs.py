@@ -59,3 +59,38 @@ def test_the_hardware_backend_without_its_extra_is_one_line(tmp_path, monkeypatc
     # (Without the extra at all, pyserial is the first import missing.)
     assert len(err) == 1 and ".[hardware]" in err[0], err
     assert "needs dynamixel-sdk" in err[0] or "needs pyserial" in err[0], err
+
+
+def test_a_root_handler_does_not_print_the_projects_lines_twice(capsys):
+    """`import dm_control.mjcf` (through absl) installs a root handler; the project's
+    records must not propagate to it."""
+    root = logging.getLogger()
+    extra = logging.StreamHandler(sys.stderr)
+    root.addHandler(extra)
+    try:
+        configure(logging.INFO)
+        logging.getLogger("vlr.run").info("sim world open")
+    finally:
+        root.removeHandler(extra)
+    assert capsys.readouterr().err.splitlines() == ["[vlr] sim world open"]
+
+
+def test_the_progress_bar_follows_quiet_and_the_terminal(monkeypatch):
+    from vlr.logs import progress_bar
+
+    class Terminal:
+        def isatty(self):
+            return True
+
+        def write(self, text):
+            pass
+
+        def flush(self):
+            pass
+
+    configure(logging.INFO)
+    assert progress_bar(total=1).disable                      # stderr here is no terminal
+    assert not progress_bar(total=1, file=Terminal()).disable
+    assert progress_bar(True, total=1, file=Terminal()).disable      # --quiet
+    configure(logging.WARNING)                                        # vlr -q
+    assert progress_bar(total=1, file=Terminal()).disable

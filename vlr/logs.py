@@ -11,7 +11,7 @@ from __future__ import annotations
 import logging
 import sys
 
-__all__ = ["PACKAGES", "configure", "level_for"]
+__all__ = ["PACKAGES", "configure", "level_for", "progress_bar"]
 
 #: The loggers configured: the project's packages only, so that a dependency's INFO records
 #: (numba, matplotlib, ray) stay as quiet as their authors meant.
@@ -71,4 +71,17 @@ def configure(level: int = logging.INFO) -> None:
             logger.removeHandler(_handler)
         logger.addHandler(handler)
         logger.setLevel(level)
+        # A dependency may install a root handler (`import dm_control.mjcf` does, through
+        # absl): propagated, every record would print twice.
+        logger.propagate = False
     _handler = handler
+
+
+def progress_bar(quiet: bool = False, **kwargs):
+    """A tqdm progress bar on stderr, or one that draws nothing: with `quiet` (a command's
+    --quiet), under `vlr -q` (the project's loggers above INFO), or when stderr is not a
+    terminal (tqdm's `disable=None`), where a bar's frames would fill a log file."""
+    from tqdm import tqdm
+
+    off = quiet or logging.getLogger("vlr").getEffectiveLevel() > logging.INFO
+    return tqdm(disable=True if off else None, **kwargs)

@@ -110,11 +110,9 @@ def run(args: argparse.Namespace) -> int:
     todo = pending(trials, out, retry_failed=args.retry_failed)
     print(f"sweep {spec.name!r}: {len(trials)} trials, {len(trials) - len(todo)} already "
           f"done, {len(todo)} to run -> {out}", flush=True)
-    bar = None
-    if not args.quiet:
-        from tqdm import tqdm
+    from vlr.logs import progress_bar
 
-        bar = tqdm(total=len(todo), desc="sweep", unit="trial")
+    bar = progress_bar(args.quiet, total=len(todo), desc="sweep", unit="trial")
     failed = 0
     t0 = time.perf_counter()
 

@@ -339,10 +339,9 @@ def run_seed(job: SeedRun) -> dict:
                 raise UserError(f"--policy {job.policy!r}: the factory returned "
                                 f"{policy!r}, not a policy (a callable observation -> "
                                 "action)")
-        if not job.quiet:
-            from tqdm import tqdm
+        from vlr.logs import progress_bar
 
-            bar = tqdm(desc=job.name, unit="move")
+        bar = progress_bar(job.quiet, desc=job.name, unit="move")
         steps = 0
         while True:
             action = policy(obs)
