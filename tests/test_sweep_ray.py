@@ -6,6 +6,7 @@ Starting Ray costs seconds and most of a GB here, so the tests share ONE local i
 (module fixture); the CLI reuses an instance that is already up and leaves it running."""
 
 import csv
+import signal
 import sys
 
 import pytest
@@ -21,10 +22,13 @@ TIMING = {"s_per_iteration", "s/iteration", "s_per_trial", "filter s/trial", "wa
 @pytest.fixture(scope="module")
 def ray_instance():
     ray = pytest.importorskip("ray")
+    # Ray's driver takes SIGTERM for itself; the tests after these expect the default back.
+    before = signal.getsignal(signal.SIGTERM)
     # address="local": our own instance, whatever `ray start` cluster this machine has.
     ray.init(address="local", num_cpus=2, include_dashboard=False)
     yield ray
     ray.shutdown()
+    signal.signal(signal.SIGTERM, before)
 
 
 def _table(path):

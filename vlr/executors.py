@@ -249,7 +249,7 @@ def run_ray(trials: list[Trial], out: Path, workers: int | None, on_done: OnDone
             kwargs["runtime_env"] = runtime_env
         if address:
             try:
-                ray.init(address=address, **kwargs)
+                _init_ray(ray, address=address, **kwargs)
             except (ConnectionError, ValueError, RuntimeError) as exc:
                 raise UserError(f"cannot connect to the Ray cluster at {address!r}: "
                                 f"{exc}") from None
@@ -258,7 +258,7 @@ def run_ray(trials: list[Trial], out: Path, workers: int | None, on_done: OnDone
             # (numba cache in vlr/__pycache__, NUMBA_CACHE_DIR, MUJOCO_GL): no runtime_env.
             # address="local": a new instance even if a `ray start` cluster (or its stale
             # /tmp/ray/ray_current_cluster) is on this machine.
-            ray.init(address="local", num_cpus=workers or os.cpu_count() or 1, **kwargs)
+            _init_ray(ray, address="local", num_cpus=workers or os.cpu_count() or 1, **kwargs)
         started = True
     try:
         cpus = int(ray.cluster_resources().get("CPU", 1))
@@ -296,6 +296,20 @@ def run_ray(trials: list[Trial], out: Path, workers: int | None, on_done: OnDone
     finally:
         if started:
             ray.shutdown()
+
+
+def _init_ray(ray: Any, **kwargs: Any) -> None:
+    """`ray.init`, keeping this process's SIGINT and SIGTERM handlers: Ray's driver installs
+    its own SIGTERM handler (a bare `sys.exit`) over the sweep's stop (`stop_on_signals`), and
+    leaves it behind after `ray.shutdown`."""
+    main = threading.current_thread() is threading.main_thread()
+    old = {sig: signal.getsignal(sig) for sig in _STOP_SIGNALS} if main else {}
+    try:
+        ray.init(**kwargs)
+    finally:
+        for sig, handler in old.items():
+            if handler is not None:
+                signal.signal(sig, handler)
 
 
 def _ray_error(exc: Exception) -> str:
