@@ -41,7 +41,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from sim.gap_fit import profile_unknown
-from sim.pads import SLIDE_FRICTION, TORSION_FRICTION
+from sim.pads import SLIDE_FRICTION
 from vlr.errors import UserError
 from vlr.explore import ActionStream
 from vlr.identify import LoopConfig
@@ -51,27 +51,31 @@ from vlr.motion import (
     MotionConfig,
     MotionModel,
     ObjectParams,
-    PadFriction,
     ParticleState,
 )
 from vlr.observation import grasp_turn, rotation_error
 
-__all__ = ["LADDER", "FILTER_RUNG", "GapSettings", "record_actions", "measure_gap",
+__all__ = ["LADDER", "filter_rung", "GapSettings", "record_actions", "measure_gap",
            "gap_report", "format_report", "OBJECTS"]
 
 _BASE = ("springs", "tendon", "limits", "contacts")
 _ALL = _BASE + ("link_gravity", "object_gravity")
-# Model terms switched on in turn: (name, energy terms, rolling contacts, the pads' friction
-# in the energy (`vlr.motion.PadFriction`)). "+ rolling" is the filter's own model; the
-# pads' friction is measured beside it (docs/DECISIONS.md: not adopted by the filter).
-LADDER: tuple[tuple[str, tuple[str, ...], bool, bool], ...] = (
-    ("fixed contacts, no weights", _BASE, False, False),
-    ("+ link weights", _BASE + ("link_gravity",), False, False),
-    ("+ object weight", _ALL, False, False),
-    ("+ rolling", _ALL, True, False),
-    ("+ friction", _ALL, True, True),
+# Model terms switched on in turn, each a setting of the one motion model (`vlr.motion.
+# MotionConfig`): (name, energy terms, rolling contacts, the pads' friction mu (inf: none)).
+# "+ friction" has the sim's pads' mu (`sim.pads`): known, like the pad's radius.
+LADDER: tuple[tuple[str, tuple[str, ...], bool, float], ...] = (
+    ("fixed contacts, no weights", _BASE, False, math.inf),
+    ("+ link weights", _BASE + ("link_gravity",), False, math.inf),
+    ("+ object weight", _ALL, False, math.inf),
+    ("+ rolling", _ALL, True, math.inf),
+    ("+ friction", _ALL, True, SLIDE_FRICTION),
 )
-FILTER_RUNG = "+ rolling"
+
+
+def filter_rung(motion: MotionConfig) -> str:
+    """The rung that is the filter's own model: with the pads' friction or without."""
+    return "+ friction" if (motion.rolling and math.isfinite(motion.friction)) else (
+        "+ rolling" if motion.rolling else "+ object weight")
 OBJECTS = ("apple", "wine_glass", "toy_block", "flat_screwdriver", "gelatin_box")
 STARTS = ("settle", "sim-loads")
 
@@ -88,10 +92,8 @@ class GapSettings:
         loop: the loop's settings, whose exploratory actions these are (the action range
             and band; `vlr.explore.ActionStream`, the stream of `vlr identify`).
         motion: the model's settings (`vlr.motion.MotionConfig`; each rung switches its
-            terms and rolling); None: the sim identification's own (the sim backend's
-            defaults, `vlr.settings.load_settings`).
-        friction: the pads' friction in the friction rung (`vlr.motion.PadFriction`); by
-            default the sim's pads' (`sim.pads`): known, like the pad's radius.
+            terms, rolling and friction); None: the sim identification's own (the sim
+            backend's defaults, `vlr.settings.load_settings`).
         start: where each prediction starts (module docstring): "settle" or "sim-loads".
         ramp_time: how long the sim takes to make each command change [s]
             (`sim.backend.SimOptions.ramp_time`); None: the sim identification's own
@@ -114,7 +116,6 @@ class GapSettings:
     drift_actions: int = 15
     loop: LoopConfig = LoopConfig()
     motion: MotionConfig | None = None
-    friction: PadFriction = PadFriction(slide=SLIDE_FRICTION, spin=TORSION_FRICTION)
     start: str = "settle"
     ramp_time: float | None = None
     fit: str | None = None
@@ -286,22 +287,16 @@ def _turn_summary(rows: list[dict]) -> dict:
 
 
 def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
-                rolling: bool = True, friction: bool = False) -> dict:
-    """Per-action, static and drift gap of the motion model with `terms` and rolling or
-    pinned contacts (module docstring), with the pads' friction (`settings.friction`) in the
-    energy if `friction`."""
+                rolling: bool = True, friction: float = math.inf) -> dict:
+    """Per-action, static and drift gap of the motion model with `terms`, rolling or pinned
+    contacts and the pads' friction mu `friction` (inf: none) (module docstring)."""
     model = HandModel.from_spec(rec.hand_spec)
     obj = ObjectParams.from_spec(rec.object_spec)
     # The turn's axis runs from the thumb (`vlr.observation.grasp_turn`), as the filter's
     # turn term does; a hand without one has no turn split (NaN), not another finger's.
     thumb = model.finger_index("thumb") if "thumb" in model.names else None
-    cfg = replace(settings.motion, terms=terms, rolling=rolling)
-    if friction:
-        # The pads' stick and slip wedge the grasp while the normal forces update (the first
-        # half of the iterations): at 1e-5 rad the solve stops before it has,
-        # and the rung's per-action ratios grow by 0.04 on the apple; 1e-6 rad settles it.
-        cfg = replace(cfg, tol_theta=min(cfg.tol_theta, 1e-6), tol_pos=min(cfg.tol_pos, 1e-7))
-    motion = MotionModel(model, obj, cfg, settings.friction if friction else None)
+    cfg = replace(settings.motion, terms=terms, rolling=rolling, friction=friction)
+    motion = MotionModel(model, obj, cfg)
     # The static settle may travel further than an action may (the model's own equilibrium).
     settle = replace(cfg, jump_theta=1.0, jump_pos=0.05, max_iter=200)
     rows, static = [], []
@@ -408,7 +403,7 @@ def _drift(motion: MotionModel, settle: MotionConfig, model: HandModel, rec: Rec
 
 def gap_report(settings: GapSettings, ladder: tuple = LADDER) -> dict:
     """Record the actions once, then measure every rung of `ladder` on them. The top-level
-    ratios are the filter's model's (`FILTER_RUNG`), else the last rung's."""
+    ratios are the filter's model's (`filter_rung`), else the last rung's."""
     t0 = time.perf_counter()
     if settings.fit:
         check_fit(settings)
@@ -418,7 +413,8 @@ def gap_report(settings: GapSettings, ladder: tuple = LADDER) -> dict:
                         "nothing to measure")
     configs = [{"name": name, **measure_gap(rec, terms, settings, rolling, friction)}
                for name, terms, rolling, friction in ladder]
-    full = next((c for c in configs if c["name"] == FILTER_RUNG), configs[-1])
+    full = next((c for c in configs if c["name"] == filter_rung(settings.motion)),
+                configs[-1])
     true_p = [np.linalg.norm(b.position - a.position) * 1e3
               for a, b in zip(rec.truths, rec.truths[1:], strict=False)]
     true_r = [_angle_deg(b.rotation @ a.rotation.T)
@@ -427,7 +423,7 @@ def gap_report(settings: GapSettings, ladder: tuple = LADDER) -> dict:
         "object": settings.object, "hand": settings.hand, "seed": settings.seed,
         "actions": len(rec.commands) - 1, "grasp_lost_at": rec.dropped_at,
         "motion": {k: v for k, v in vars(settings.motion).items() if k != "terms"},
-        "friction": vars(settings.friction),
+        "filter_rung": filter_rung(settings.motion),
         "start": settings.start,
         "ramp_time": settings.ramp_time,
         "true_motion": {"position_mm_mean": float(np.mean(true_p)),

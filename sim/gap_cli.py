@@ -12,7 +12,7 @@ import io
 import math
 from dataclasses import replace
 
-from sim.gap import FILTER_RUNG, OBJECTS, STARTS, GapSettings, format_report, gap_report
+from sim.gap import OBJECTS, STARTS, GapSettings, filter_rung, format_report, gap_report
 from vlr.errors import UserError
 
 __all__ = ["register", "table_rows", "CSV_COLUMNS"]
@@ -132,10 +132,11 @@ def run(args: argparse.Namespace) -> int:
             print(format_report(rep) + "\n", flush=True)
             reports.append(rep)
     rows = [r for rep in reports for r in table_rows(rep)]
-    mine = [r for r in rows if r["rung"] == FILTER_RUNG]
+    rung = filter_rung(base.motion)
+    mine = [r for r in rows if r["rung"] == rung]
     if mine:
         ori = [r["ratio_orientation"] for r in mine]
-        print(f"{FILTER_RUNG} (the filter's model), {len(mine)} object-seeds: per-action "
+        print(f"{rung} (the filter's model), {len(mine)} object-seeds: per-action "
               f"ratio position {min(r['ratio_position'] for r in mine):.3f}-"
               f"{max(r['ratio_position'] for r in mine):.3f}, orientation {min(ori):.3f}-"
               f"{max(ori):.3f}; drift at most "

@@ -1,6 +1,7 @@
-"""The motion solve's kernel path (`vlr._energy_kernels.solve_path_batch`): it lands where the
-NumPy path of substeps and follow-ups does, on particles of a real filter, and it costs the
-Newton iterations it is measured at (counts, not times: `vlr bench` times them)."""
+"""The motion solve (`vlr.kernels.solve`) on particles of a real filter: the stored tangent's
+prediction and the tolerances land within what the likelihood sees, one solve an action
+lands near its many-step limit, and an action and a settle cost the Newton steps they are
+measured at (counts, not times: `vlr bench` times them)."""
 
 from dataclasses import replace
 
@@ -36,20 +37,6 @@ def _filter(obj_name: str, particles: int = 600, unknowns=()):
     return pf, pf.command + random_action(rng, 3)
 
 
-def _both_paths(obj_name, unknowns, tight=False):
-    """The kernel path and the NumPy path of the same action, at the defaults or (`tight`)
-    at tolerances 2000 times finer."""
-    pf, u1 = _filter(obj_name, unknowns=unknowns)
-    m, u0 = pf.motion, pf.command.copy()
-    cfg = replace(m.config, tol_theta=1e-7, tol_pos=1e-8) if tight else m.config
-    a, b = pf.state.copy(), pf.state.copy()
-    status_a, iters_a = m._solve_path(a, u1, cfg, tight, u0)
-    start = b.copy()
-    status_b, iters_b = m._solve(b, u1, cfg, tight, u0)
-    m._follow(b, start, u1, u0, cfg, status_b, iters_b)
-    return a, b, status_a, status_b
-
-
 def _pom_gaps(a, b) -> tuple[np.ndarray, np.ndarray]:
     """The POM poses' distances [m] and angles [deg] between two solves of the same
     particles, where both succeeded."""
@@ -65,59 +52,52 @@ CASES = [("apple", ()), ("wine_glass", ()), ("gelatin_box", ()), ("apple", ("cur
 
 
 @pytest.mark.parametrize("obj_name, unknowns", CASES)
-def test_the_kernel_path_is_the_numpy_path(obj_name, unknowns, monkeypatch):
-    """Without its predictor the kernel does what the NumPy path does, on a sphere, a
-    cylinder, a plane and each particle's own curvature: the same statuses, and states equal
-    to round-off (a plane's 10 m kernel sphere magnifies it: 4e-7 rad measured)."""
-    import vlr.motion
-
-    monkeypatch.setattr(vlr.motion, "PREDICT", False)
-    a, b, status_a, status_b = _both_paths(obj_name, unknowns)
-    assert np.array_equal(status_a, status_b) and np.array_equal(a.valid, b.valid)
-    both = a.valid & b.valid
-    assert both.sum() > 0.9 * a.n
-    assert np.abs(a.theta[both] - b.theta[both]).max() < 1e-5
-    assert np.abs(a.anchors[both] - b.anchors[both]).max() < 1e-7
-
-
-@pytest.mark.parametrize("obj_name, unknowns", CASES)
-def test_the_predictor_lands_within_what_the_likelihood_sees(obj_name, unknowns):
-    """With its predictor the kernel ends each solve elsewhere within the tolerance, and a
-    particle at a fold may end on another branch; at tolerances fine enough to see the
-    predictor alone, the POM poses the likelihood weighs stay within a tenth of its finest
-    scales (0.2 mm, 0.4 degree) of the NumPy path's on 99% of the particles (measured:
-    0.018 mm on the wine glass, where 1% of the particles sit at a fold; 1e-9 mm on the
-    others)."""
-    a, b, _, _ = _both_paths(obj_name, unknowns, tight=True)
-    d_pos, d_rot = _pom_gaps(a, b)
-    assert np.quantile(d_pos, 0.99) < 0.02e-3
-    assert np.quantile(d_rot, 0.99) < 0.04
-
-
-@pytest.mark.parametrize("obj_name, unknowns", CASES)
-def test_the_tolerances_are_under_what_the_likelihood_sees(obj_name, unknowns):
-    """At its tolerances (`MotionConfig.tol_theta`, `tol_pos`) the kernel lands within a
-    tenth of the likelihood's finest scales of a solve at tolerances 2000 times finer, on
-    99% of the particles (measured: 0.003-0.006 mm and 0.001-0.005 degree)."""
+def test_the_prediction_and_the_tolerances_land_within_what_the_likelihood_sees(
+        obj_name, unknowns):
+    """With the stored tangent's prediction and at the filter's tolerances
+    (`MotionConfig.tol_theta`, `tol_pos`), the POM poses the likelihood weighs land within
+    a tenth of its finest scales (0.2 mm, 0.4 degree) of a solve without the prediction at
+    tolerances 2000 times finer, on 98% of the particles; a particle at a fold may end on
+    another branch (measured: 1.7% beyond it with each particle's own curvature, a few
+    nearly flat ones; none on the others)."""
     pf, u1 = _filter(obj_name, unknowns=unknowns)
     m, u0 = pf.motion, pf.command.copy()
     a, b = pf.state.copy(), pf.state.copy()
-    m._solve_path(a, u1, m.config, False, u0)
-    m._solve_path(b, u1, replace(m.config, tol_theta=1e-7, tol_pos=1e-8), True, u0)
+    m.solve(a, u1, u_from=u0)
+    tight = replace(m.config, tol_theta=1e-7, tol_pos=1e-8, max_iter=60)
+    b.tangent = None   # no prediction
+    m.solve(b, u1, tight, u_from=u0)
     d_pos, d_rot = _pom_gaps(a, b)
-    assert np.quantile(d_pos, 0.99) < 0.02e-3
-    assert np.quantile(d_rot, 0.99) < 0.04
+    assert np.quantile(d_pos, 0.98) < 0.02e-3
+    assert np.quantile(d_rot, 0.98) < 0.04
 
 
-def test_the_newton_iterations_an_action_and_a_settle_cost():
-    """The filter's iteration on the apple at the sim's settings, counted: measured 11
-    Newton iterations per particle for an action (median; mean 13.3: 4 rolling substeps of
-    2.5-3.5, each but the first from the last one's change). The bounds are a regression of
-    the solver (the former tolerances, 1e-5 rad and 1 um: 14 and 16.4), not of the
-    machine."""
+@pytest.mark.parametrize("obj_name, unknowns", CASES[:3])
+def test_one_solve_lands_near_its_many_step_limit(obj_name, unknowns):
+    """An action is one solve, its contacts' slip exact to third order in the action: 16
+    solves of a 16th of it land within the likelihood's finest scales of it on most
+    particles (measured at the median 0.03-0.05 mm and degree: the tangential forces' lever
+    is first order, docs/DECISIONS.md)."""
+    pf, u1 = _filter(obj_name, unknowns=unknowns)
+    m, u0 = pf.motion, pf.command.copy()
+    tight = replace(m.config, tol_theta=1e-8, tol_pos=1e-9, max_iter=60, follow_substeps=0)
+    one, many = pf.state.copy(), pf.state.copy()
+    m.solve(one, u1, tight, u_from=u0)
+    for j in range(16):
+        m.solve(many, u0 + (u1 - u0) * ((j + 1) / 16), tight, u_from=u0 + (u1 - u0) * (j / 16))
+    d_pos, d_rot = _pom_gaps(one, many)
+    assert np.median(d_pos) < 0.1e-3 and np.median(d_rot) < 0.1
+    assert np.quantile(d_pos, 0.9) < 0.3e-3 and np.quantile(d_rot, 0.9) < 0.4
+
+
+def test_the_newton_steps_an_action_and_a_settle_cost():
+    """The filter's iteration on the apple at the sim's settings, counted: an action 1.7
+    Newton-step equivalents per particle (mean; the stored tangent's prediction and one or
+    two corrections), 1 at the median. The bounds are a regression of the solver, not of
+    the machine."""
     pf, u1 = _filter("apple")
     rec = pf.step(u1, None)
     assert rec is not None
-    assert pf.newton_iterations["action"] <= 12
-    assert pf.profile["action_mean"] <= 14.5
+    assert pf.newton_iterations["action"] <= 2
+    assert pf.profile["action_mean"] <= 2.5
     assert pf.profile["failed_share"] < 0.05

@@ -20,10 +20,12 @@ Array layout used across `vlr` (P particles, N fingers, K joints):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
-from vlr import _energy_kernels as _kern
+from vlr.kernels.chain import contact_points_batch
+from vlr.kernels.records import Hand
 from vlr.spec import FingerSpec, HandSpec
 
 __all__ = [
@@ -114,6 +116,18 @@ class HandModel:
     base_pos: np.ndarray
     base_rot: np.ndarray
     tendon_stiffness: float
+
+    @cached_property
+    def kernel_record(self) -> Hand:
+        """The hand's constants as the kernels take them (`vlr.kernels.records.Hand`),
+        gravity zero (`vlr.motion` sets its own)."""
+        lim = self.limits
+        c = np.ascontiguousarray
+        return Hand(base_pos=c(self.base_pos, dtype=float), base_rot=c(self.base_rot, dtype=float),
+                    radii=c(self.radii), rest=c(self.rest), lo=c(lim[..., 0]), hi=c(lim[..., 1]),
+                    link_mass=c(self.link_masses), link_com=c(self.link_coms),
+                    pad_xy=c(self.pad_center[:, :2]), pad_r=c(self.pad_radius, dtype=float),
+                    gravity=np.zeros(3))
 
     def __post_init__(self) -> None:
         ks = {c.n_joints for c in self.chains}
@@ -293,12 +307,8 @@ def contact_points(model: HandModel, theta: np.ndarray, normals: np.ndarray,
     if theta.ndim == 3 and normals.shape == theta.shape[:2] + (3,):
         # Particles (P, N, K): one pass of a kernel, not a dozen NumPy temporaries.
         out = np.empty(normals.shape)
-        _kern.contact_points_batch(np.ascontiguousarray(theta), np.ascontiguousarray(seg),
-                                   np.ascontiguousarray(normals),
-                                   np.ascontiguousarray(model.base_pos, dtype=float),
-                                   np.ascontiguousarray(model.base_rot, dtype=float),
-                                   np.ascontiguousarray(model.pad_center[:, :2]),
-                                   np.ascontiguousarray(model.pad_radius, dtype=float), out)
+        contact_points_batch(np.ascontiguousarray(theta), np.ascontiguousarray(seg),
+                             np.ascontiguousarray(normals), model.kernel_record, out)
         return out
     q = joint_positions(model, theta, seg)[..., -1, :]
     c_d = contact_in_distal(model, normals, seg)

@@ -1,24 +1,16 @@
-"""Rolling contacts: the object's local surface at each contact and the contact update
-(docs/METHOD.md 8.2, "Rolling").
+"""The object's local surface at each contact (docs/METHOD.md 8.2, "Rolling").
 
-A fingertip pad is a sphere of known radius. Within one action the motion model pins each
-pad's material contact point to the object's (Eq. 8 as a penalty): the pad pivots about it.
-For a pad rolling without slip that is exact to first order, since the instantaneous motion
-of a rolling contact is a rotation about the contact point; what the pin misses is that the
-contact itself travels, over the pad and over the object. Without the update the pivot stays
-at the grasp's contact points, and over a sequence of actions the prediction drifts (8-9% of
-the motion over 15 actions in a feasibility study, under 2% with rolling).
+A fingertip pad is a sphere of known radius. The motion model's rolling contact
+(`vlr.kernels.contacts`) holds each pad on the object's LOCAL surface at its contact, a
+primitive fixed in O: a plane (a box face: exact), a sphere of radius rho (the apple), or a
+cylinder of radius rho about an axis fixed in O (the wine glass's bowl, the screwdriver's
+handle, a cup's wall). It is described by its kind and curvature (known from the object,
+`LocalSurface.from_spec`) and anchored at each particle's own contact point and normal, so
+the filter needs no global object model. Treating a sphere as flat was measured to raise
+the per-action gap to 0.11.
 
-`roll_contacts` is that update, applied after each solve: the new contact is where the pad
-sphere now touches the object's LOCAL surface at the previous contact. The local surface is
-described by its kind and curvature (known from the object, `LocalSurface.from_spec`) and
-anchored at each particle's own contact point and normal, so the filter needs no global
-object model: a plane (a box face: exact), a sphere of radius rho (the apple), or a cylinder
-of radius rho about an axis fixed in O (the wine glass's bowl, the screwdriver's handle, a
-cup's wall). Treating a sphere as flat was measured to raise the per-action gap to 0.11.
-
-Known limits: sliding is not modelled (friction is assumed to hold), nor is the second-order
-error within one action (`MotionConfig.rolling_substeps` splits an action to shrink it).
+`surface_contact_normals` places the contacts where one such object would touch every pad:
+the filter's contact prior.
 """
 
 from __future__ import annotations
@@ -31,8 +23,7 @@ import numpy as np
 from vlr.kinematics import HandModel, contact_points, plane_rotation
 from vlr.spec import ObjectSpec
 
-__all__ = ["LocalSurface", "surface_normals", "local_centres", "pad_gaps", "roll_contacts",
-           "contact_radii", "FLAT_CURVATURE"]
+__all__ = ["LocalSurface", "contact_radii", "surface_contact_normals", "FLAT_CURVATURE"]
 
 KINDS = ("plane", "sphere", "cylinder")
 
@@ -68,10 +59,9 @@ class LocalSurface:
 
     @property
     def kernel_radius(self) -> float:
-        """The radius of the local sphere the motion model's rolling term uses [m]: the
-        sphere's own, a cylinder's (a sphere of its radius: exact around the axis, too
-        curved along it; `local_centres`), and 10 m for a plane (flat within 0.1% of a pad's
-        travel; an infinite radius has no centre to hold fixed: `FLAT_CURVATURE`)."""
+        """Each contact's radius of curvature as the motion model's kernels take it [m]:
+        the sphere's or the cylinder's own; a plane's 1 / `FLAT_CURVATURE`, at and above
+        which a contact is flat (`contact_radii`)."""
         return 1.0 / FLAT_CURVATURE if self.kind == "plane" else self.radius
 
     @property
@@ -108,114 +98,11 @@ def _distal_rotations(model: HandModel, theta: np.ndarray) -> np.ndarray:
     return np.einsum("nab,pnbc->pnac", model.base_rot, plane_rotation(theta.sum(axis=-1)))
 
 
-def surface_normals(model: HandModel, theta: np.ndarray, normals: np.ndarray,
-                    rot: np.ndarray) -> np.ndarray:
-    """(P, N, 3) the object's outward surface normal at each contact, in O: minus the pad's
-    outward normal there (the surfaces are tangent at a contact)."""
-    n_palm = np.einsum("pnab,pnb->pna", _distal_rotations(model, theta), normals)
-    return -np.einsum("pba,pnb->pna", rot, n_palm)
-
-
-def _side_normals(surface: LocalSurface, m: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """A cylinder's outward normals m (..., 3) made normal to its axis, and whether each
-    contact is on the side (normal within 60 degrees of normal to the axis; else an end
-    face, flat)."""
-    axis = np.asarray(surface.axis, dtype=float)
-    m_side = m - np.einsum("...i,i->...", m, axis)[..., None] * axis
-    side_len = np.linalg.norm(m_side, axis=-1, keepdims=True)
-    on_side = side_len > 0.5
-    return m_side / np.where(on_side, side_len, 1.0), on_side
-
-
-def local_centres(surface: LocalSurface, anchors: np.ndarray, m: np.ndarray,
-                  rho: np.ndarray | None = None) -> np.ndarray:
-    """What the motion model's rolling term holds each pad to, in O: the local centre of
-    curvature a - rho m (the local sphere's, `LocalSurface.kernel_radius`; a cylinder's side
-    is held to a sphere of its radius: exact across the axis, too curved along it, which
-    measured no worse than holding the pad to the axis, docs/DECISIONS.md). (P, N, 3); `m`
-    the object's outward normals at the contacts `anchors` (`surface_normals`); `rho` (P, N)
-    each contact's own radius of curvature [m] (an unknown curvature, `contact_radii`), None:
-    the surface's."""
-    r = surface.kernel_radius if rho is None else np.asarray(rho, dtype=float)[..., None]
-    return anchors - r * m
-
-
 def contact_radii(curvature: np.ndarray) -> np.ndarray:
     """Each contact's radius of curvature in the rolling term [m] from its curvature [1/m]
     (`ParticleState.surface_curvature`): 1 / kappa, a plane's (`FLAT_CURVATURE`) at or below
     it."""
     return 1.0 / np.maximum(np.asarray(curvature, dtype=float), FLAT_CURVATURE)
-
-
-def pad_gaps(centre: np.ndarray, local: np.ndarray, reach: np.ndarray | float) -> np.ndarray:
-    """(...) the rolling term's gap: each pad centre's distance from its local centre of
-    curvature `local`, less the reach rho + r (negative: the pad sinks in). One frame."""
-    return np.linalg.norm(centre - local, axis=-1) - reach
-
-
-def roll_contacts(model: HandModel, surface: LocalSurface, theta: np.ndarray,
-                  normals: np.ndarray, anchors: np.ndarray, pos: np.ndarray, rot: np.ndarray,
-                  segments: np.ndarray, normals_before: np.ndarray,
-                  slide_friction: float = math.inf,
-                  rho: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Move each contact to where the pad now touches the object's local surface.
-
-    Args:
-        theta, normals, anchors, pos, rot, segments: the particles after a fixed-contact
-            solve (`vlr.motion.ParticleState` arrays).
-        normals_before: (P, N, 3) the object's surface normals at the contacts in O before
-            that solve (`surface_normals`): material to the object, so the solve left them.
-        slide_friction: mu; a contact whose tangential stretch carries more than mu times
-            its normal force (both k_c times a stretch) has slid: its stretch is returned
-            onto the friction cone (the return mapping of elasto-plastic friction). inf: no
-            contact slides.
-        rho: (P, N) each contact's own radius of curvature [m] (`contact_radii`: an unknown
-            curvature; a plane of the surface's kind becomes a sphere of it), None: the
-            surface's. A contact as flat as a plane's (`FLAT_CURVATURE`) keeps its normal.
-    Returns:
-        (normals, anchors): the new pad normals in D and contact points in O. The POM pose
-        is unchanged, and so are the rolling term's residuals (the pad-to-surface gap and the
-        tangential offset of the contact points): they carry the contact forces, so the
-        state stays at equilibrium; zeroing them would drop the grasp's squeeze and friction.
-    """
-    radius = model.pad_radius[None, :, None]
-    centre_palm = contact_points(model, theta, np.zeros_like(normals), segments)
-    centre = np.einsum("pba,pnb->pna", rot, centre_palm - pos[:, None, :])
-    contact = np.einsum("pba,pnb->pna", rot,
-                        contact_points(model, theta, normals, segments) - pos[:, None, :])
-    # The residuals as the motion model's rolling term sees them (its local sphere).
-    d = contact - anchors
-    tangential = d - np.sum(d * normals_before, axis=-1, keepdims=True) * normals_before
-    local = local_centres(surface, anchors, normals_before, rho)
-    reach = surface.kernel_radius if rho is None else np.asarray(rho, dtype=float)
-    gap = pad_gaps(centre, local, reach + radius[..., 0])[..., None]
-    if math.isfinite(slide_friction):
-        cap = slide_friction * np.maximum(0.0, -gap)
-        t = np.linalg.norm(tangential, axis=-1, keepdims=True)
-        tangential = tangential * np.where(t > cap, cap / np.where(t > 0, t, 1.0), 1.0)
-    m = normals_before
-    if surface.kind == "plane" and rho is None:
-        out = m
-    else:
-        r = surface.radius if rho is None else np.asarray(rho, dtype=float)[..., None]
-        if surface.kind == "cylinder":
-            axis = np.asarray(surface.axis, dtype=float)
-            m_side, on_side = _side_normals(surface, m)    # an end face is flat
-            d = centre - (anchors - r * m_side)    # from the local axis of curvature
-            d = d - np.einsum("pni,i->pn", d, axis)[..., None] * axis
-            d_len = np.linalg.norm(d, axis=-1, keepdims=True)
-            out = np.where(on_side, d / np.where(d_len > 0, d_len, 1.0), m)
-        else:
-            d = centre - (anchors - r * m)    # from the local centre of curvature
-            out = d / np.linalg.norm(d, axis=-1, keepdims=True)
-        if rho is not None:
-            out = np.where(r >= 1.0 / FLAT_CURVATURE, m, out)
-    new_anchors = centre - (radius + gap) * out - tangential
-    n_palm = -np.einsum("pab,pnb->pna", rot, out)
-    new_normals = np.einsum("pnba,pnb->pna", _distal_rotations(model, theta), n_palm)
-    return (np.ascontiguousarray(new_normals / np.linalg.norm(new_normals, axis=-1,
-                                                               keepdims=True)),
-            np.ascontiguousarray(new_anchors))
 
 
 def surface_contact_normals(model: HandModel, surface: LocalSurface, theta: np.ndarray,

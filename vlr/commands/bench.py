@@ -9,9 +9,10 @@ resampling, jitter (the Liu-West draw and the settle of the jittered particles);
 their sum, "summary" (quantiles for the history) is reported apart. The yardstick is one
 batched `np.linalg.solve` of P 12x12 systems, the linear algebra of one Newton step for every
 particle: the machine's own speed, so that a ratio to it compares across machines.
-`--profile` adds what the iterations are made of: Newton iterations per particle (median,
-mean, 99th percentile) of the action and of the settle, the share of particles that failed or
-needed the follow-up of a large move, and the cost of one energy evaluation per term.
+`--profile` adds what the iterations are made of: Newton-step equivalents per particle (one
+energy, gradient and Hessian evaluation with its arrow solve; mean, median, 99th percentile)
+of the action and of the settle (per jittered particle), the share of particles that failed
+or needed the follow-up of a large move, and the cost of one energy evaluation per term.
 """
 
 from __future__ import annotations
@@ -114,35 +115,35 @@ def bench_one(n_particles: int, repeats: int, seed: int = 0, contacts: str = "ro
 
 
 def term_costs(n_particles: int, seed: int = 0, repeats: int = 5) -> dict[str, float]:
-    """Microseconds per particle of one energy evaluation (energy, gradient and Hessian) with
-    each term alone, and with all of the filter's terms, on n_particles copies of the
-    bench's particles (so that the kernel's start-up does not count). The least of `repeats`
-    timed calls, as `timeit` takes it: a call of a few milliseconds varies by half on this
-    kind of machine, and the noise only adds."""
-    from vlr import _energy_kernels as kern
+    """Microseconds per particle of one energy evaluation (energy, gradient and Hessian, the
+    contacts' start included) with each term alone, with the contacts pinned, and with all
+    of the filter's terms, on n_particles copies of the bench's particles (so that the
+    kernel's start-up does not count). The least of `repeats` timed calls, as `timeit`
+    takes it: a call of a few milliseconds varies by half on this kind of machine, and the
+    noise only adds."""
+    from dataclasses import replace
+
+    from vlr.kernels.solve import evaluate_batch
     from vlr.motion import TERMS
 
     pf, _, _ = _filter(min(n_particles, 6_000), seed, "rolling")
     m = pf.motion
     st = pf.state.take(np.resize(np.arange(pf.state.n), n_particles))  # n_particles of them
-    roll = m.rolling_frames(st, forces=False)
-    shared = m._shared_for(m.config, st)
+    ps = m.particles(st)
+    variants = {name: replace(m.config, terms=(name,), rolling=name == "contacts")
+                for name in TERMS}
+    variants["pinned contacts"] = replace(m.config, terms=("contacts",), rolling=False)
+    variants["all"] = m.config
     out = {}
-    for name in (*TERMS, "all"):
-        flags = m.config.flags() if name == "all" else np.zeros(kern.N_TERMS, dtype=np.int64)
-        if name != "all":
-            flags[TERMS[name]] = 1
-            if name == "rolling":
-                flags[kern.CONTACTS] = 1
+    for name, cfg in variants.items():
         energy = np.empty(st.n)
+        record = cfg.record()
         times = []
         # One untimed call first: each term's first calls ran at up to twice its cost (the
-        # threads' and the caches' warm-up), which put the rolling term alone above all terms.
+        # threads' and the caches' warm-up).
         for _ in range(repeats + 1):
             t = time.perf_counter()
-            kern.evaluate_batch(st.theta, st.segments, st.normals, st.anchors, roll, st.pos,
-                                st.rot, st.stiffness, st.tendon, pf.command, *shared, flags,
-                                m._prm, energy)
+            evaluate_batch(ps, m._hand, m._surface, record, pf.command, energy)
             times.append(time.perf_counter() - t)
         out[name] = float(np.min(times[1:])) / st.n * 1e6
     return out
@@ -163,7 +164,7 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--threads {args.threads} must be 1..{cores} (the cores numba has)")
     numba.set_num_threads(args.threads or cores)
     from vlr import smoke
-    from vlr._energy_kernels import solve_path_batch  # noqa: F401  (compile/load the cache)
+    from vlr.kernels.solve import solve_batch  # noqa: F401  (compile/load the cache)
     from vlr.io import check_output_file, write_json_atomic
 
     if args.json is not None:
@@ -174,7 +175,7 @@ def run(args: argparse.Namespace) -> int:
           f"filter settings, {numba.get_num_threads()} of {cores} threads; seconds are "
           "medians over the iterations")
     print(f"{'particles':>10} " + " ".join(f"{k:>11}" for k in (*PHASES, "total"))
-          + f" {'yardstick':>10} {'ratio':>6}   Newton iterations (action, settle)")
+          + f" {'yardstick':>10} {'ratio':>6}   Newton steps (action, settle)")
     # VLR_SMOKE (vlr/smoke.py): the same run at a smoke test's sizes.
     counts = dict.fromkeys(smoke.cap(n, smoke.BENCH_PARTICLES) for n in args.particles)
     repeats = smoke.cap(args.repeats, 1)
@@ -195,13 +196,13 @@ def run(args: argparse.Namespace) -> int:
     costs = None
     if args.profile:
         for n, med in results.items():
-            print(f"\n{n} particles, per particle: action {med['action_mean']:.1f} Newton "
-                  f"iterations (median {med['newton_action']:.0f}, 99th percentile "
-                  f"{med['action_p99']:.0f}), settle {med['settle_mean']:.1f} over the "
-                  f"{med['settled_share']:.0%} jittered; failed {med['failed_share']:.2%}, "
-                  f"followed {med['followed_share']:.2%}; "
+            print(f"\n{n} particles, Newton-step equivalents per particle: action "
+                  f"{med['action_mean']:.2f} (median {med['newton_action']:.0f}, 99th "
+                  f"percentile {med['action_p99']:.0f}), settle {med['settle_mean']:.2f} per "
+                  f"jittered particle ({med['settled_share']:.0%} of them); failed "
+                  f"{med['failed_share']:.2%}, followed {med['followed_share']:.2%}; "
                   f"{med['motion'] / max(med['action_mean'], 1e-9) / n * 1e6:.2f} us per "
-                  "particle-iteration of the action")
+                  "particle-step of the action")
         costs = term_costs(60_000, args.seed)
         print("\none energy evaluation per particle [us]: "
               + ", ".join(f"{k} {v:.2f}" for k, v in costs.items()))

@@ -1,0 +1,641 @@
+"""One action per particle (Eq. 9): primal-dual Newton from the stored tangent, and the
+batched entry points.
+
+A particle at its equilibrium x0 under commands u0 carries its tangent S = dx*/du and
+S_lam = dlambda/du (three back-substitutions at the end of its last solve). An action
+u0 -> u1 then:
+
+1. predicts x = x0 + S du and the contacts' forces lambda = lambda0 + S_lam du; the pads'
+   friction limit mu lambda_n is held at this predicted normal force;
+2. takes full primal-dual Newton steps (`vlr.kernels.contacts`: the constraints' curvature
+   weighted by the multipliers, which each step updates to k_c (C + J d)), each step held
+   to the step limits;
+3. stops when a step is under the tolerance (taken), or when the steps converge
+   quadratically and the next one would be a tenth of it (|d_k| < |d_k-1| / 10 and
+   |d_k|^3 / |d_k-1|^2 < tol / 10, taken): no evaluation only to confirm;
+4. if a step grows instead, or a block is not positive definite, goes on with
+   Levenberg-Marquardt damping and an Armijo line search on the energy (the particle is
+   near a fold or a stop);
+5. a slipping contact whose normal force ended more than 2% (and 10 mN) off its held limit
+   is solved again from there with the limit updated, once;
+6. moves the rolling contacts to where the pads now touch (`contacts.rolled`) and stores
+   the new tangent.
+
+A settle (a new hypothesis brought to equilibrium) is the same solve with u1 = u0. A
+particle whose solve fails by a jump or no convergence is solved again from its start in
+`cfg.follow` equal steps of the action (a large but continuous move is followed; a jump
+to another branch still fails). "Evaluations" count the energy, gradient and Hessian
+evaluations, each with its arrow solve: a Newton-step equivalent.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import namedtuple
+
+import numpy as np
+from numba import njit, prange
+
+from vlr.kernels.arrow import factor, solve
+from vlr.kernels.chain import distal_point, finger_chain, hand_terms, object_gravity, to_palm
+from vlr.kernels.contacts import STICK_ZONE, friction, pinned, rolled, rolling, start_context
+from vlr.kernels.records import (
+    CTX_CAP,
+    INACTIVE,
+    JUMP,
+    LAM_N,
+    LAM_T,
+    N_CTX,
+    N_LAM,
+    NO_CONVERGENCE,
+    NONFINITE,
+    OK,
+)
+
+Scratch = namedtuple("Scratch", "gA gC A B C Ainv X S La y dth dc sphi cphi qy qz jk dm jz t3 "
+                                "KO RD RD0 MO MD vals jac lam lam0 ctx th0 p0 R0 Rt tht pt "
+                                "th_s nrm_s anc_s p_s R_s u_from u_to u_b du")
+
+
+@njit(cache=True)
+def make_scratch(n_f, k_n):
+    """Per-thread buffers of one particle's solve (allocating per particle would cost
+    more than the solve)."""
+    nc = k_n + 6
+    return Scratch(np.empty((n_f, k_n)), np.empty(6), np.empty((n_f, k_n, k_n)),
+                   np.empty((n_f, k_n, 6)), np.empty((6, 6)), np.empty((n_f, k_n, k_n)),
+                   np.empty((n_f, k_n, 6)), np.empty((6, 6)), np.empty((k_n, k_n)),
+                   np.empty((n_f, k_n)), np.empty((n_f, k_n)), np.empty(6),
+                   np.empty(k_n), np.empty(k_n), np.empty(k_n), np.empty(k_n),
+                   np.empty((3, nc)), np.empty((3, nc)), np.empty((3, nc)),
+                   np.empty((3, nc)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)),
+                   np.empty((3, 3)), np.empty((3, 3)), np.empty((n_f, 4)),
+                   np.empty((n_f, 4, nc)), np.empty((n_f, N_LAM)),
+                   np.empty((n_f, N_LAM)), np.empty((n_f, N_CTX)),
+                   np.empty((n_f, k_n)), np.empty(3), np.empty((3, 3)), np.empty((3, 3)),
+                   np.empty((n_f, k_n)), np.empty(3), np.empty((n_f, k_n)),
+                   np.empty((n_f, 3)), np.empty((n_f, 3)), np.empty(3), np.empty((3, 3)),
+                   np.empty(n_f), np.empty(n_f), np.empty(n_f), np.empty(n_f))
+
+
+@njit(cache=True, inline="always", _nrt=False)
+def rotate(R, w0, w1, w2, out):
+    """out = R exp([w]x) (Rodrigues)."""
+    ang = math.sqrt(w0 * w0 + w1 * w1 + w2 * w2)
+    e00, e01, e02, e10, e11, e12, e20, e21, e22 = 1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0
+    if ang > 1e-300:
+        kx, ky, kz = w0 / ang, w1 / ang, w2 / ang
+        s, c = math.sin(ang), math.cos(ang)
+        v = 1.0 - c
+        e00 = c + kx * kx * v
+        e01 = kx * ky * v - kz * s
+        e02 = kx * kz * v + ky * s
+        e10 = ky * kx * v + kz * s
+        e11 = c + ky * ky * v
+        e12 = ky * kz * v - kx * s
+        e20 = kz * kx * v - ky * s
+        e21 = kz * ky * v + kx * s
+        e22 = c + kz * kz * v
+    for a in range(3):
+        r0, r1, r2 = R[a, 0], R[a, 1], R[a, 2]
+        out[a, 0] = r0 * e00 + r1 * e10 + r2 * e20
+        out[a, 1] = r0 * e01 + r1 * e11 + r2 * e21
+        out[a, 2] = r0 * e02 + r1 * e12 + r2 * e22
+
+
+@njit(cache=True, _nrt=False)
+def evaluate(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc):
+    """Energy of one particle at (th, p, R) (Eq. 6, 7, 8, the stops and gravity); its
+    gradient and Hessian into sc's arrow blocks, the contacts' constraints into sc.vals,
+    sc.jac. The rolling contacts read sc.ctx (their start) and sc.R0."""
+    n_f, k_n = th.shape
+    sc.gA[:] = 0.0
+    sc.gC[:] = 0.0
+    sc.A[:] = 0.0
+    sc.B[:] = 0.0
+    sc.C[:] = 0.0
+    chain = (sc.sphi, sc.cphi, sc.qy, sc.qz)
+    w = (sc.jk, sc.dm, sc.jz, sc.t3, sc.KO, sc.RD, sc.RD0, sc.MO, sc.MD)
+    e = 0.0
+    for i in range(n_f):
+        finger_chain(th, seg, i, sc.sphi, sc.cphi, sc.qy, sc.qz)
+        e += hand_terms(th, stiff, kt, u, hand, cfg, i, sc.sphi, sc.cphi, sc.qy, sc.qz,
+                        sc.gA, sc.A)
+        if cfg.contacts:
+            if cfg.rolling:
+                e += rolling(th, seg, p, R, sc.R0, hand, cfg, i, chain, sc.ctx, sc.lam,
+                             sc.vals, sc.jac, sc.gA, sc.gC, sc.A, sc.B, sc.C, w)
+            else:
+                e += pinned(th, seg, nrm, anc, p, R, hand, cfg, i, chain, sc.lam, sc.vals,
+                            sc.jac, sc.gA, sc.gC, sc.A, sc.B, sc.C, sc.jk)
+    if cfg.object_gravity:
+        e += object_gravity(p, R, mass, com, hand, sc.gC, sc.C)
+    return e
+
+
+@njit(cache=True, _nrt=False)
+def _start(th, seg, nrm, anc, p, R, rho, hand, srf, cfg, sc):
+    """The solve's start: x0 saved, each contact's context and its multipliers there."""
+    n_f, k_n = th.shape
+    for i in range(n_f):
+        for k in range(k_n):
+            sc.th0[i, k] = th[i, k]
+    for a in range(3):
+        sc.p0[a] = p[a]
+        for b in range(3):
+            sc.R0[a, b] = R[a, b]
+    if not cfg.contacts:
+        return
+    for i in range(n_f):
+        finger_chain(th, seg, i, sc.sphi, sc.cphi, sc.qy, sc.qz)
+        if cfg.rolling:
+            start_context(th, seg, nrm, anc, p, R, rho, hand, srf, cfg, i,
+                          (sc.sphi, sc.cphi, sc.qy, sc.qz), sc.ctx, sc.lam, sc.KO, sc.RD)
+        else:
+            _pinned_offset(th, seg, nrm, anc, p, R, hand, cfg, i, sc)
+    for i in range(n_f):
+        for a in range(N_LAM):
+            sc.lam0[i, a] = sc.lam[i, a]
+
+
+@njit(cache=True, _nrt=False)
+def _pinned_offset(th, seg, nrm, anc, p, R, hand, cfg, i, sc):
+    """The pinned contact i's force at x0, k_c (x_D - (p + R a)), into sc.lam."""
+    k_n = th.shape[1]
+    r = hand.pad_r[i]
+    fx, fy, fz = distal_point(seg, i, k_n, sc.sphi, sc.cphi, sc.qy, sc.qz,
+                              hand.pad_xy[i, 0] + r * nrm[i, 0],
+                              hand.pad_xy[i, 1] + r * nrm[i, 1], r * nrm[i, 2])
+    xx, xy, xz = to_palm(hand, i, fx, fy, fz)
+    x = (xx, xy, xz)
+    sc.lam[i, LAM_N] = 0.0
+    for a in range(3):
+        sc.lam[i, LAM_T + a] = cfg.kc * (x[a] - p[a] - (R[a, 0] * anc[i, 0]
+                                                         + R[a, 1] * anc[i, 1]
+                                                         + R[a, 2] * anc[i, 2]))
+
+
+@njit(cache=True, _nrt=False)
+def _predict(th, p, R, tangent, du, cfg, sc, n_f, k_n):
+    """x = x0 + S du, lambda = lambda0 + S_lam du (the stored tangent); returns the step's
+    size in tolerance units (inf: no tangent yet, all zeros)."""
+    n_x = n_f * k_n + 6
+    big_th = 0.0
+    for i in range(n_f):
+        for k in range(k_n):
+            t = 0.0
+            for c in range(n_f):
+                t += tangent[i * k_n + k, c] * du[c]
+            th[i, k] += t
+            big_th = max(big_th, abs(t))
+    d = sc.dc  # the object's predicted step
+    for a in range(6):
+        t = 0.0
+        for c in range(n_f):
+            t += tangent[n_f * k_n + a, c] * du[c]
+        d[a] = t
+    for a in range(3):
+        p[a] += d[a]
+    rotate(R, d[3], d[4], d[5], sc.Rt)
+    for a in range(3):
+        for b in range(3):
+            R[a, b] = sc.Rt[a, b]
+    for i in range(n_f):
+        for a in range(N_LAM):
+            t = 0.0
+            for c in range(n_f):
+                t += tangent[n_x + i * N_LAM + a, c] * du[c]
+            sc.lam[i, a] += t
+    size = max(big_th / cfg.tol_theta,
+               math.sqrt(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]) / cfg.tol_pos,
+               math.sqrt(d[3] * d[3] + d[4] * d[4] + d[5] * d[5]) / cfg.tol_theta)
+    return size if size > 0.0 else math.inf
+
+
+@njit(cache=True, _nrt=False)
+def _hold_friction(cfg, sc, n_f):
+    """The pads' friction limit held at the predicted normal force (CTX_CAP), the tangential
+    multipliers projected into the cone."""
+    for i in range(n_f):
+        lam_n = max(0.0, -sc.lam[i, LAM_N])
+        sc.ctx[i, CTX_CAP] = lam_n
+        if math.isfinite(cfg.friction):
+            _friction_force(sc.lam, i, cfg.kc, cfg.friction, lam_n, sc.KO)
+
+
+@njit(cache=True, inline="always", _nrt=False)
+def _friction_force(lam, i, kc, mu, lam_n, G):
+    """The tangential multiplier k_c z (the stick's) made the friction's force at z
+    (`contacts.friction`), in place."""
+    _, fx, fy, fz = friction(lam[i, LAM_T] / kc, lam[i, LAM_T + 1] / kc,
+                             lam[i, LAM_T + 2] / kc, kc, mu, lam_n, G)
+    lam[i, LAM_T], lam[i, LAM_T + 1], lam[i, LAM_T + 2] = fx, fy, fz
+
+
+@njit(cache=True, inline="always", _nrt=False)
+def _step_size(sc, cfg, n_f, k_n):
+    """The step's size in tolerance units: max(|dtheta|_inf / tol_theta, |dp| / tol_pos,
+    |dw| / tol_theta); and its scale to the step limits (1: within them)."""
+    big_th = 0.0
+    for i in range(n_f):
+        for k in range(k_n):
+            big_th = max(big_th, abs(sc.dth[i, k]))
+    dc = sc.dc
+    big_p = math.sqrt(dc[0] * dc[0] + dc[1] * dc[1] + dc[2] * dc[2])
+    big_w = math.sqrt(dc[3] * dc[3] + dc[4] * dc[4] + dc[5] * dc[5])
+    size = max(big_th / cfg.tol_theta, big_p / cfg.tol_pos, big_w / cfg.tol_theta)
+    t = 1.0
+    if big_th > cfg.max_step_theta:
+        t = min(t, cfg.max_step_theta / big_th)
+    if big_w > cfg.max_step_theta:
+        t = min(t, cfg.max_step_theta / big_w)
+    if big_p > cfg.max_step_pos:
+        t = min(t, cfg.max_step_pos / big_p)
+    return size, t
+
+
+@njit(cache=True, inline="always", _nrt=False)
+def _take(th, p, R, sc, t, n_f, k_n):
+    """x <- x + t d (the rotation by R exp([t dw]x))."""
+    for i in range(n_f):
+        for k in range(k_n):
+            th[i, k] += t * sc.dth[i, k]
+    for a in range(3):
+        p[a] += t * sc.dc[a]
+    rotate(R, t * sc.dc[3], t * sc.dc[4], t * sc.dc[5], sc.Rt)
+    for a in range(3):
+        for b in range(3):
+            R[a, b] = sc.Rt[a, b]
+
+
+@njit(cache=True, inline="always", _nrt=False)
+def _update_multipliers(cfg, sc, t, n_f, k_n):
+    """lambda <- k_c (C + J t d) per contact (the tangential one into its cone)."""
+    if not cfg.contacts:
+        return
+    nc = k_n + 6
+    for i in range(n_f):
+        for a in range(4):
+            jd = 0.0
+            for c in range(nc):
+                dv = sc.dth[i, c] if c < k_n else sc.dc[c - k_n]
+                jd += sc.jac[i, a, c] * dv
+            sc.lam[i, a] = cfg.kc * (sc.vals[i, a] + t * jd)
+        if cfg.rolling and math.isfinite(cfg.friction):
+            _friction_force(sc.lam, i, cfg.kc, cfg.friction, sc.ctx[i, CTX_CAP], sc.KO)
+
+
+@njit(cache=True, _nrt=False)
+def _energy_at(th, p, R, t, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc, n_f, k_n):
+    """The energy (with its derivatives, into sc) at x + t d, the trial in sc.tht/pt/Rt."""
+    for i in range(n_f):
+        for k in range(k_n):
+            sc.tht[i, k] = th[i, k] + t * sc.dth[i, k]
+    for a in range(3):
+        sc.pt[a] = p[a] + t * sc.dc[a]
+    rotate(R, t * sc.dc[3], t * sc.dc[4], t * sc.dc[5], sc.Rt)
+    return evaluate(sc.tht, sc.pt, sc.Rt, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg,
+                    sc)
+
+
+@njit(cache=True, _nrt=False)
+def newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc, max_iter,
+           prev):
+    """Primal-dual Newton from the current (th, p, R) at commands u (module docstring,
+    steps 2-4); returns (converged, evaluations). sc.lam holds the multipliers to start
+    from; `prev` is the size of the step that led here (the predictor's, in tolerance
+    units; inf: none). The last factorisation is left in sc (for the tangent)."""
+    n_f, k_n = th.shape
+    damped = False
+    mu = cfg.mu0
+    evals = 0
+    e = evaluate(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc)
+    evals += 1
+    while evals <= max_iter:
+        if not math.isfinite(e):
+            return False, evals
+        if not damped:
+            if not factor(sc.A, sc.B, sc.C, 0.0, sc.Ainv, sc.X, sc.S, sc.La):
+                damped = True
+        if damped:
+            while not factor(sc.A, sc.B, sc.C, mu, sc.Ainv, sc.X, sc.S, sc.La):
+                mu *= 10.0
+                if mu > 1e12:
+                    return False, evals
+        solve(sc.gA, sc.gC, sc.B, sc.Ainv, sc.X, sc.S, sc.dth, sc.dc, sc.y)
+        size, t = _step_size(sc, cfg, n_f, k_n)
+        if not math.isfinite(size):
+            return False, evals
+        if not damped and size > 2.0 * prev:
+            # The steps grow: not in Newton's basin (a fold, a stop engaging).
+            damped = True
+            continue
+        if size * t <= 1.0:
+            _update_multipliers(cfg, sc, t, n_f, k_n)
+            _take(th, p, R, sc, t, n_f, k_n)
+            return True, evals
+        if not damped:
+            _update_multipliers(cfg, sc, t, n_f, k_n)
+            _take(th, p, R, sc, t, n_f, k_n)
+            if (t == 1.0 and prev < math.inf and size < 0.1 * prev
+                    and size ** 3 < 0.1 * prev * prev):
+                return True, evals
+            prev = size
+            e = evaluate(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc)
+            evals += 1
+            continue
+        # Damped: Levenberg-Marquardt with an Armijo line search on the energy.
+        gd = 0.0
+        for i in range(n_f):
+            for k in range(k_n):
+                gd += sc.gA[i, k] * sc.dth[i, k]
+        for a in range(6):
+            gd += sc.gC[a] * sc.dc[a]
+        _update_multipliers(cfg, sc, t, n_f, k_n)
+        accepted = False
+        e_t = e
+        tol_e = 1e-15 + 1e-13 * abs(e)
+        for _ls in range(8):
+            e_t = _energy_at(th, p, R, t, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg,
+                             sc, n_f, k_n)
+            evals += 1
+            if math.isfinite(e_t) and e_t <= e + 1e-4 * t * gd + tol_e:
+                accepted = True
+                break
+            denom = 2.0 * (e_t - e - gd * t)
+            t_new = 0.5 * t
+            if math.isfinite(e_t) and denom > 0.0:
+                t_new = -gd * t * t / denom
+            t = min(max(t_new, 0.1 * t), 0.5 * t)
+            if evals > max_iter:
+                break
+        if accepted:
+            for i in range(n_f):
+                for k in range(k_n):
+                    th[i, k] = sc.tht[i, k]
+            for a in range(3):
+                p[a] = sc.pt[a]
+                for b in range(3):
+                    R[a, b] = sc.Rt[a, b]
+            e = e_t
+            if t == 1.0:
+                mu = max(mu * 0.1, 1e-12)
+            if size * t <= 1.0:
+                return True, evals
+            prev = size * t
+        else:
+            mu *= 10.0
+            if mu > 1e12:
+                return False, evals
+            e = evaluate(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc)
+            evals += 1
+    return False, evals
+
+
+@njit(cache=True, _nrt=False)
+def _store_tangent(th, kt, tangent, hand, cfg, sc, n_f, k_n):
+    """The equilibrium's tangent from the last factorisation: H dx/du_c = d(-grad)/du_c,
+    nonzero on finger c's joints where its tendon is taut (k_t r_ck), and the multipliers'
+    dlambda/du = k_c J dx/du (a sliding contact's tangential force follows its normal
+    force along its direction)."""
+    n_x = n_f * k_n + 6
+    nc = k_n + 6
+    for c in range(n_f):
+        sc.gA[:] = 0.0
+        sc.gC[:] = 0.0
+        s = 0.0
+        for k in range(k_n):
+            s += hand.radii[c, k] * (th[c, k] - hand.lo[c, k])
+        if cfg.tendon and sc.u_b[c] - s > 0.0:
+            for k in range(k_n):
+                sc.gA[c, k] = -kt[c] * hand.radii[c, k]
+        solve(sc.gA, sc.gC, sc.B, sc.Ainv, sc.X, sc.S, sc.dth, sc.dc, sc.y)
+        for i in range(n_f):
+            for k in range(k_n):
+                tangent[i * k_n + k, c] = sc.dth[i, k]
+        for a in range(6):
+            tangent[n_f * k_n + a, c] = sc.dc[a]
+        for i in range(n_f):
+            for a in range(4):
+                jd = 0.0
+                if cfg.contacts:
+                    for col in range(nc):
+                        dv = sc.dth[i, col] if col < k_n else sc.dc[col - k_n]
+                        jd += sc.jac[i, a, col] * dv
+                tangent[n_x + i * 4 + a, c] = cfg.kc * jd
+            if cfg.contacts and cfg.rolling and math.isfinite(cfg.friction):
+                # the friction's force moves as its Hessian says: G J_z dx/du
+                friction(sc.vals[i, 1], sc.vals[i, 2], sc.vals[i, 3], cfg.kc, cfg.friction,
+                         sc.ctx[i, CTX_CAP], sc.KO)
+                jz0 = tangent[n_x + i * 4 + LAM_T, c] / cfg.kc
+                jz1 = tangent[n_x + i * 4 + LAM_T + 1, c] / cfg.kc
+                jz2 = tangent[n_x + i * 4 + LAM_T + 2, c] / cfg.kc
+                for a in range(3):
+                    tangent[n_x + i * 4 + LAM_T + a, c] = (sc.KO[a, 0] * jz0 + sc.KO[a, 1] * jz1
+                                                           + sc.KO[a, 2] * jz2)
+
+
+@njit(cache=True, _nrt=False)
+def solve_one(q, ps, hand, srf, cfg, u0, u1, predict, max_iter, sc):
+    """Particle q from its equilibrium at u0 to its equilibrium at u1 (the module
+    docstring's steps 1-6), in place; returns (status, evaluations)."""
+    th, seg, nrm, anc = ps.theta[q], ps.seg[q], ps.nrm[q], ps.anc[q]
+    p, R, stiff, kt = ps.pos[q], ps.rot[q], ps.stiff[q], ps.kt[q]
+    mass, com, rho, tangent = ps.mass[q], ps.com[q], ps.rho[q], ps.tangent[q]
+    n_f, k_n = th.shape
+    _start(th, seg, nrm, anc, p, R, rho, hand, srf, cfg, sc)
+    for c in range(n_f):
+        sc.du[c] = u1[c] - u0[c]
+        sc.u_b[c] = u1[c]
+    prev = math.inf
+    if predict:
+        prev = _predict(th, p, R, tangent, sc.du, cfg, sc, n_f, k_n)
+    rolling_friction = cfg.contacts and cfg.rolling
+    if rolling_friction:
+        _hold_friction(cfg, sc, n_f)
+    ok, evals = newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u1, hand, cfg, sc,
+                       max_iter, prev)
+    if ok and rolling_friction and math.isfinite(cfg.friction):
+        # A sliding contact's limit was held at the predicted normal force: if the force
+        # ended far from it, solve once more from here with the limit where it ended.
+        again = False
+        for i in range(n_f):
+            held = sc.ctx[i, CTX_CAP]
+            lam_n = max(0.0, -sc.lam[i, LAM_N])
+            lt = math.sqrt(sc.lam[i, LAM_T] ** 2 + sc.lam[i, LAM_T + 1] ** 2
+                           + sc.lam[i, LAM_T + 2] ** 2)
+            if (lt > 0.7 * cfg.friction * held  # sliding
+                    and abs(lam_n - held) > 0.02 * held + 0.01):
+                again = True
+        if again:
+            for i in range(n_f):
+                sc.ctx[i, CTX_CAP] = max(0.0, -sc.lam[i, LAM_N])
+            ok, more = newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u1, hand, cfg,
+                              sc, max_iter, math.inf)
+            evals += more
+    big = 0.0
+    for i in range(n_f):
+        for k in range(k_n):
+            big = max(big, abs(th[i, k] - sc.th0[i, k]))
+    dp = math.sqrt((p[0] - sc.p0[0]) ** 2 + (p[1] - sc.p0[1]) ** 2 + (p[2] - sc.p0[2]) ** 2)
+    if not (math.isfinite(big) and math.isfinite(dp)):
+        return NONFINITE, evals
+    if not ok:
+        return NO_CONVERGENCE, evals
+    if big > cfg.jump_theta or dp > cfg.jump_pos:
+        return JUMP, evals
+    _store_tangent(th, kt, tangent, hand, cfg, sc, n_f, k_n)
+    if rolling_friction:
+        # The stretch each anchor carries on: the elastic part, the one whose force is the
+        # contact's force now (`contacts.friction` inverted; the stick's lambda / k_c).
+        for i in range(n_f):
+            _carried_stretch(sc, i, cfg)
+            finger_chain(th, seg, i, sc.sphi, sc.cphi, sc.qy, sc.qz)
+            rolled(th, seg, nrm, anc, p, R, hand, i, (sc.sphi, sc.cphi, sc.qy, sc.qz),
+                   sc.ctx, sc.vals, sc.KO, sc.RD)
+    return OK, evals
+
+
+@njit(cache=True, _nrt=False)
+def _carried_stretch(sc, i, cfg):
+    """sc.vals[i, 1:] = the stretch z whose force (`contacts.friction`, the limit held at
+    sc.ctx's normal force) is the tangential multiplier: lambda / k_c for the stick alone,
+    else lambda eps / sqrt(cap^2 - |lambda|^2) (a force on the cone kept just inside it)."""
+    kc = cfg.kc
+    lx, ly, lz = sc.lam[i, LAM_T], sc.lam[i, LAM_T + 1], sc.lam[i, LAM_T + 2]
+    f = 1.0 / kc
+    if math.isfinite(cfg.friction):
+        cap = cfg.friction * sc.ctx[i, CTX_CAP]
+        if cap > 1e-9:
+            eps = max(cap / kc, STICK_ZONE)
+            l2 = min(lx * lx + ly * ly + lz * lz, (cap * (1.0 - 1e-6)) ** 2)
+            f = eps / math.sqrt(cap * cap - l2)
+        else:
+            f = 0.0
+    sc.vals[i, 1], sc.vals[i, 2], sc.vals[i, 3] = f * lx, f * ly, f * lz
+
+
+@njit(cache=True, _nrt=False)
+def _save(q, ps, sc):
+    th, nrm, anc, p, R = ps.theta[q], ps.nrm[q], ps.anc[q], ps.pos[q], ps.rot[q]
+    n_f, k_n = th.shape
+    for i in range(n_f):
+        for k in range(k_n):
+            sc.th_s[i, k] = th[i, k]
+        for a in range(3):
+            sc.nrm_s[i, a] = nrm[i, a]
+            sc.anc_s[i, a] = anc[i, a]
+    for a in range(3):
+        sc.p_s[a] = p[a]
+        for b in range(3):
+            sc.R_s[a, b] = R[a, b]
+
+
+@njit(cache=True, _nrt=False)
+def _restore(q, ps, sc):
+    th, nrm, anc, p, R = ps.theta[q], ps.nrm[q], ps.anc[q], ps.pos[q], ps.rot[q]
+    n_f, k_n = th.shape
+    for i in range(n_f):
+        for k in range(k_n):
+            th[i, k] = sc.th_s[i, k]
+        for a in range(3):
+            nrm[i, a] = sc.nrm_s[i, a]
+            anc[i, a] = sc.anc_s[i, a]
+    for a in range(3):
+        p[a] = sc.p_s[a]
+        for b in range(3):
+            R[a, b] = sc.R_s[a, b]
+
+
+@njit(cache=True, _nrt=False)
+def solve_path(q, ps, hand, srf, cfg, u0, u1, predict, sc):
+    """`solve_one`, and on a jump or no convergence the follow-up from the start in
+    cfg.follow equal steps at twice the iterations. Returns (status (the first attempt's
+    if the follow-up fails too), evaluations, followed)."""
+    follow = cfg.follow
+    if follow > 1:
+        _save(q, ps, sc)
+    st, evals = solve_one(q, ps, hand, srf, cfg, u0, u1, predict, cfg.max_iter, sc)
+    if follow <= 1 or not (st == JUMP or st == NO_CONVERGENCE):
+        return st, evals, False
+    _restore(q, ps, sc)
+    n_f = u0.shape[0]
+    for j in range(1, follow + 1):
+        for c in range(n_f):
+            sc.u_from[c] = u0[c] + (u1[c] - u0[c]) * ((j - 1) / follow)
+            sc.u_to[c] = u0[c] + (u1[c] - u0[c]) * (j / follow)
+        st2, more = solve_one(q, ps, hand, srf, cfg, sc.u_from, sc.u_to, predict,
+                              2 * cfg.max_iter, sc)
+        evals += more
+        if st2 != OK:
+            return st, evals, True
+    return OK, evals, True
+
+
+@njit(parallel=True, cache=True)
+def solve_batch(ps, hand, srf, cfg, u0, u1, predict, status, evals, followed):
+    """Every valid particle from its equilibrium at u0 to its equilibrium at u1
+    (`solve_path`), in place: the state, ps.valid (False after a failure), status,
+    evals (evaluations) and followed (the follow-up was tried)."""
+    n_p, n_f, k_n = ps.theta.shape
+    n_chunks = min(n_p, 64)
+    # A write into a record's array in a prange body is lost (numba 0.68: the parfor
+    # copies the attribute); through a name of its own it is not.
+    valid = ps.valid
+    for ch in prange(n_chunks):
+        sc = make_scratch(n_f, k_n)
+        for q in range(ch * n_p // n_chunks, (ch + 1) * n_p // n_chunks):
+            followed[q] = False
+            if not valid[q]:
+                status[q] = INACTIVE
+                evals[q] = 0
+                continue
+            st, ev, fo = solve_path(q, ps, hand, srf, cfg, u0, u1, predict, sc)
+            status[q] = st
+            evals[q] = ev
+            followed[q] = fo
+            valid[q] = st == OK
+
+
+@njit(cache=True)
+def evaluate_at(q, ps, hand, srf, cfg, th, p, R, u, lam, gA, gC, A, B, C, vals, jac):
+    """Particle q's energy at (th, p, R) from its start (its own state, x0): into gA, gC,
+    A, B, C its gradient and Hessian blocks, into vals, jac its contacts' constraints and
+    rows. lam (N, N_LAM): the multipliers the Hessian's curvature terms weigh; NaN: the
+    start's. The pads' friction limit is held at the start's normal force. For tests and
+    diagnostics."""
+    n_f, k_n = th.shape
+    sc = make_scratch(n_f, k_n)
+    _start(ps.theta[q], ps.seg[q], ps.nrm[q], ps.anc[q], ps.pos[q], ps.rot[q], ps.rho[q],
+           hand, srf, cfg, sc)
+    if cfg.contacts and cfg.rolling:
+        _hold_friction(cfg, sc, n_f)
+    for i in range(n_f):
+        for a in range(N_LAM):
+            if not math.isnan(lam[i, a]):
+                sc.lam[i, a] = lam[i, a]
+    e = evaluate(th, p, R, ps.seg[q], ps.nrm[q], ps.anc[q], ps.stiff[q], ps.kt[q],
+                 ps.mass[q], ps.com[q], u, hand, cfg, sc)
+    gA[:] = sc.gA
+    gC[:] = sc.gC
+    A[:] = sc.A
+    B[:] = sc.B
+    C[:] = sc.C
+    vals[:] = sc.vals
+    jac[:] = sc.jac
+    return e
+
+
+@njit(parallel=True, cache=True)
+def evaluate_batch(ps, hand, srf, cfg, u, energy):
+    """Every particle's energy, gradient and Hessian at its own state (energies into
+    `energy`): one Newton step's evaluation, for `vlr bench --profile`."""
+    n_p, n_f, k_n = ps.theta.shape
+    n_chunks = min(n_p, 64)
+    for ch in prange(n_chunks):
+        sc = make_scratch(n_f, k_n)
+        for q in range(ch * n_p // n_chunks, (ch + 1) * n_p // n_chunks):
+            th, p, R = ps.theta[q], ps.pos[q], ps.rot[q]
+            _start(th, ps.seg[q], ps.nrm[q], ps.anc[q], p, R, ps.rho[q], hand, srf, cfg, sc)
+            energy[q] = evaluate(th, p, R, ps.seg[q], ps.nrm[q], ps.anc[q], ps.stiff[q],
+                                 ps.kt[q], ps.mass[q], ps.com[q], u, hand, cfg, sc)
