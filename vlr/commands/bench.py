@@ -164,8 +164,8 @@ def run(args: argparse.Namespace) -> int:
         raise UserError(f"--threads {args.threads} must be 1..{cores} (the cores numba has)")
     numba.set_num_threads(args.threads or cores)
     from vlr import smoke
-    from vlr.kernels.solve import solve_batch  # noqa: F401  (compile/load the cache)
     from vlr.io import check_output_file, write_json_atomic
+    from vlr.kernels.solve import solve_batch  # noqa: F401  (compile/load the cache)
 
     if args.json is not None:
         check_output_file(args.json, "--json")

@@ -158,9 +158,14 @@ def start_context(th, seg, nrm, anc, p, R, rho, hand, srf, cfg, i, chain, ctx, l
         ctx[i, CTX_O], ctx[i, CTX_O + 1], ctx[i, CTX_O + 2] = bx, by, bz
         ctx[i, CTX_DIR], ctx[i, CTX_DIR + 1], ctx[i, CTX_DIR + 2] = m0x, m0y, m0z
     else:
-        ctx[i, CTX_O] = bx - rk * ux
-        ctx[i, CTX_O + 1] = by - rk * uy
-        ctx[i, CTX_O + 2] = bz - rk * uz
+        # The centre or axis rho + r + g0 behind the pad centre along the primitive's
+        # normal u, g0 = w . m0 the gap the normal stretch holds: on a sphere (u = m0) the
+        # same point as rho behind b; on a cylinder a pad normal off the axis's normal plane
+        # (a jittered contact) would otherwise read a penetration of r (1 - |P m0|).
+        reach = rk + r + (wx * m0x + wy * m0y + wz * m0z)
+        ctx[i, CTX_O] = kox - reach * ux
+        ctx[i, CTX_O + 1] = koy - reach * uy
+        ctx[i, CTX_O + 2] = koz - reach * uz
     # the primitive at k_O0, the contact on the object c_O0 and on the pad c_D0
     g, mx, my, mz, _ = _primitive(kind, ctx, i, r, kox, koy, koz, KO)
     ctx[i, CTX_CO0] = kox - (g + r) * mx
@@ -382,7 +387,6 @@ def rolling(th, seg, p, R, R0, hand, cfg, i, chain, ctx, lam, vals, jac, gA, gC,
          MO[2, 0] * dox + MO[2, 1] * doy + MO[2, 2] * doz
          - 0.5 * (MD[2, 0] * rdx + MD[2, 1] * rdy + MD[2, 2] * rdz))
     n0x, n0y, n0z = ctx[i, CTX_N0], ctx[i, CTX_N0 + 1], ctx[i, CTX_N0 + 2]
-    n0 = (n0x, n0y, n0z)
     t0x, t0y, t0z = ctx[i, CTX_T0], ctx[i, CTX_T0 + 1], ctx[i, CTX_T0 + 2]
     zx = R[0, 0] * t0x + R[0, 1] * t0y + R[0, 2] * t0z + s[0]
     zy = R[1, 0] * t0x + R[1, 1] * t0y + R[1, 2] * t0z + s[1]
@@ -463,7 +467,6 @@ def rolling(th, seg, p, R, R0, hand, cfg, i, chain, ctx, lam, vals, jac, gA, gC,
         else:
             gC[c - k_n] += gr
     # The stretch: psi(z) and its Hessian in z, G (`friction`).
-    z2 = zx * zx + zy * zy + zz * zz
     G = MO  # scratch: MO is not needed past the slip's rows
     ez, fx, fy, fz = friction(zx, zy, zz, kc, cfg.friction, ctx[i, CTX_CAP], G)
     e += ez
@@ -560,9 +563,10 @@ def rolling(th, seg, p, R, R0, hand, cfg, i, chain, ctx, lam, vals, jac, gA, gC,
                 _put(i, k_n, j, c, y, A, B, C)
     # RD's (Q's) turn twice: r/2 (om x (om x Q lambda)) . n_P + 1/2 lambda . (om x (om x
     # RD c_D0)), the same for every pair of the finger's joints.
-    cdx = RD[0, 0] * ctx[i, CTX_CD0] + RD[0, 1] * ctx[i, CTX_CD0 + 1] + RD[0, 2] * ctx[i, CTX_CD0 + 2]
-    cdy = RD[1, 0] * ctx[i, CTX_CD0] + RD[1, 1] * ctx[i, CTX_CD0 + 1] + RD[1, 2] * ctx[i, CTX_CD0 + 2]
-    cdz = RD[2, 0] * ctx[i, CTX_CD0] + RD[2, 1] * ctx[i, CTX_CD0 + 1] + RD[2, 2] * ctx[i, CTX_CD0 + 2]
+    c0, c1, c2 = ctx[i, CTX_CD0], ctx[i, CTX_CD0 + 1], ctx[i, CTX_CD0 + 2]
+    cdx = RD[0, 0] * c0 + RD[0, 1] * c1 + RD[0, 2] * c2
+    cdy = RD[1, 0] * c0 + RD[1, 1] * c1 + RD[1, 2] * c2
+    cdz = RD[2, 0] * c0 + RD[2, 1] * c1 + RD[2, 2] * c2
     hqq = (0.5 * r * _double_turn(omx, omy, omz, qlx, qly, qlz, npx, npy, npz)
            + 0.5 * _double_turn(omx, omy, omz, cdx, cdy, cdz, lx, ly, lz))
     for j in range(k_n):

@@ -114,13 +114,14 @@ def _rolling(motion, state, q, theta, pos, rot) -> float:
             else:
                 kind = "plane"
         ko0 = r0.T @ (k0[i] - p0)
-        t = r0 @ (ko0 - r * m0 - a)
+        w = ko0 - r * m0 - a
+        t = r0 @ w
         t = t - (t @ n_p0) * n_p0
         b = a + r0.T @ t
         if kind == "plane":
             o, axis = b, m0
         else:
-            o = b - rho * u_dir
+            o = ko0 - (rho + r + w @ m0) * u_dir
         g0, mm0 = _primitive(kind, o, axis, rho, r, ko0)
         c_o0 = ko0 - (g0 + r) * mm0
         n0 = r0 @ mm0
