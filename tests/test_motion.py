@@ -262,6 +262,7 @@ def test_failed_solve_is_flagged_not_nan(modelo):
     assert status[0] == 0 and status[3] == 0
     assert status[1] != 0 and status[2] != 0
     assert not st.valid[1] and not st.valid[2]
+    assert not mm.followed.any()  # a settle has no path to follow
     from vlr.observation import ObservationModel, PomObservation
 
     obs = PomObservation(st.pos[0], st.rot[0])

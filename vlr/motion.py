@@ -80,8 +80,8 @@ class MotionConfig:
         follow_substeps: a particle whose solve of an action fails by a jump or no
             convergence is solved again from its start in this many equal steps, each held
             to the jump limits: a large but continuous move is followed, a jump to another
-            branch still fails. 0 turns it off. The synthetic world calls a move a snap by
-            the same test (`vlr.synthetic`).
+            branch still fails. 0 turns it off; a settle never follows. The synthetic world
+            calls a move a snap by the same test (`vlr.synthetic`).
         contact_stiffness: the contacts' stiffness k_c [N/m]: 1e6 N/m leaves 10 um of
             penetration at 10 N, and is the pads' stick stiffness.
         limit_stiffness: one-sided joint-stop penalty [N m/rad]; 100 lets a spring preload
@@ -430,6 +430,10 @@ class MotionModel:
             evaluations of each solve, each with its Newton step.
         """
         cfg = self._settings if config is None else config.record()
+        if u_from is None:
+            # A settle has no path to follow: its follow-up would only be the same solve
+            # again with more evaluations.
+            cfg = cfg._replace(follow=0)
         if config is not None and tuple(config.gravity) != tuple(self.config.gravity):
             hand = hand_record(self.model, config.gravity)
         else:

@@ -15,16 +15,19 @@ u0 -> u1 then:
    |d_k|^3 / |d_k-1|^2 < tol / 10, taken): no evaluation only to confirm;
 4. if a step grows instead, or a block is not positive definite, goes on with
    Levenberg-Marquardt damping and an Armijo line search on the energy (the particle is
-   near a fold or a stop);
+   near a fold or a stop, or a settle's start far from its equilibrium), each step held to
+   a trust radius, the last accepted step's length (three times it after a step taken
+   whole);
 5. a slipping contact whose normal force ended more than 2% (and 10 mN) off its held limit
    is solved again from there with the limit updated, once;
 6. moves the rolling contacts to where the pads now touch (`contacts.rolled`) and stores
    the new tangent.
 
 A settle (a new hypothesis brought to equilibrium) is the same solve with u1 = u0. A
-particle whose solve fails by a jump or no convergence is solved again from its start in
-`cfg.follow` equal steps of the action (a large but continuous move is followed; a jump
-to another branch still fails). "Evaluations" count the energy, gradient and Hessian
+particle whose solve of an action fails by a jump or no convergence is solved again from
+its start in `cfg.follow` equal steps of the action (a large but continuous move is
+followed; a jump to another branch still fails); a settle has no such path (`vlr.motion`
+sets cfg.follow to 0 for it). "Evaluations" count the energy, gradient and Hessian
 evaluations, each with its arrow solve: a Newton-step equivalent.
 """
 
@@ -308,6 +311,10 @@ def newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc, max_
     n_f, k_n = th.shape
     damped = False
     mu = cfg.mu0
+    # The damped steps' trust radius (tolerance units): the last accepted step's length,
+    # grown where a step was accepted whole, so that a line search does not start every
+    # step at the step limit and spend an evaluation on the trial it rejects.
+    radius = math.inf
     evals = 0
     e = evaluate(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc)
     evals += 1
@@ -345,6 +352,9 @@ def newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc, max_
             evals += 1
             continue
         # Damped: Levenberg-Marquardt with an Armijo line search on the energy.
+        if size * t > radius:
+            t = radius / size
+        t_first = t
         gd = 0.0
         for i in range(n_f):
             for k in range(k_n):
@@ -383,7 +393,9 @@ def newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc, max_
             if size * t <= 1.0:
                 return True, evals
             prev = size * t
+            radius = 3.0 * size * t if t == t_first else size * t
         else:
+            radius = min(radius, size * t)
             mu *= 10.0
             if mu > 1e12:
                 return False, evals
