@@ -11,6 +11,10 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+# Mesa's llvmpipe renders on threads of its own, which a fork() does not copy: a process
+# forked after a frame was rendered (gymnasium's AsyncVectorEnv, Stable-Baselines3's
+# SubprocVecEnv) waits for them for ever. On the caller's thread it is fork-safe.
+os.environ.setdefault("LP_NUM_THREADS", "0")
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 import mujoco  # noqa: E402

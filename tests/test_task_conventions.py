@@ -139,6 +139,35 @@ def test_async_vector_env_with_autoreset(env_id):
         envs.close()
 
 
+def _at_defaults(env_id: str) -> gym.Env:
+    return gym.wrappers.FlattenObservation(gym.make(env_id, max_episode_steps=2))
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_forked_workers_run_after_the_parent_used_an_env(env_id):
+    """Fork is gymnasium's (and Stable-Baselines3's) default start method on Linux: workers
+    forked from a process that has already identified a grasp and rendered its camera (a
+    user reading the spaces, the checker first) run too, at the defaults. numba's GNU
+    OpenMP layer aborted them and Mesa's llvmpipe threads hung them; `vlr` picks numba's
+    fork-safe layer and `sim` renders on the caller's thread."""
+    parent = gym.make(env_id)
+    try:
+        parent.reset(seed=0)
+    finally:
+        parent.close()
+    envs = gym.vector.AsyncVectorEnv([functools.partial(_at_defaults, env_id)] * 2)
+    try:
+        # With a timeout: a hung or aborted worker leaves the parent waiting for ever.
+        envs.reset_async(seed=[0, 1])
+        obs, _ = envs.reset_wait(timeout=300)
+        assert obs.shape[0] == 2 and np.all(np.isfinite(obs))
+        envs.step_async(np.stack([ACTIONS[0], -ACTIONS[0]]))
+        _, reward, *_ = envs.step_wait(timeout=300)
+        assert np.all(np.isfinite(reward))
+    finally:
+        envs.close(terminate=True)
+
+
 def test_a_failed_identification_truncates_the_episode(monkeypatch):
     import vlr.run
 
