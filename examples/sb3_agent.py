@@ -34,8 +34,11 @@ MODEL_ENV = "VLR_SB3_MODEL"
 def _ppo():
     try:
         # PyTorch's compiler (triton) crashes loading its native module once the sim is
-        # loaded; loaded first, it does not (module docstring).
+        # loaded; loaded first, it does not (module docstring). CPU-only PyTorch has none.
         import triton  # noqa: F401
+    except ImportError:
+        pass
+    try:
         from stable_baselines3 import PPO
     except ImportError:
         sys.exit("examples/sb3_agent.py needs Stable-Baselines3: pip install -e '.[learn]'")

@@ -37,3 +37,22 @@ def test_sb3_agent_trains_and_runs_beside_the_baseline(tmp_path, capsys):
     table = capsys.readouterr().out.split("the policies side by side")[1]
     assert "| handwriting | 0 |" in table, table
     assert "| handwriting, policy sb3_agent.py:agent | 0 |" in table, table
+
+
+def test_sb3_agent_finds_stable_baselines3_without_triton(monkeypatch):
+    """CPU-only PyTorch has no triton: Stable-Baselines3, installed, is found all the same
+    (the import of triton, which only works around a crash where it exists, is optional)."""
+    import sys
+    import types
+
+    spec = importlib.util.spec_from_file_location("sb3_agent", SB3_EXAMPLE)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    fake = types.ModuleType("stable_baselines3")
+    fake.PPO = object()
+    monkeypatch.setitem(sys.modules, "triton", None)            # `import triton` fails
+    monkeypatch.setitem(sys.modules, "stable_baselines3", fake)
+    assert module._ppo() is fake.PPO
+    monkeypatch.setitem(sys.modules, "stable_baselines3", None)
+    with pytest.raises(SystemExit, match="needs Stable-Baselines3"):
+        module._ppo()
