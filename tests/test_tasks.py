@@ -129,6 +129,8 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
            (["maze", "--set", "filter.guess_theta_deg=x"], "filter.guess_theta_deg"),
            (["cups", "--set", "filter.theta_spread_deg=0"], "filter.theta_spread_deg"),
            (["handwriting", "--option", "rolling=True"], "rolling"),
+           (["handwriting", "--option", "wrod=SCI"], "did you mean word?"),
+           (["maze", "--option", "n_run=2"], "did you mean n_runs?"),
            (["cups", "--alpha", "0"], "--alpha"),
            (["cups", "--option", "level_about=rim"], "level_about"),
            (["cups", "--alpha", "nan"], "--alpha"),
@@ -309,3 +311,19 @@ def test_a_hand_without_three_tendons_is_refused_in_reset(monkeypatch):
     with pytest.raises(UserError, match="3 tendons; the backend's hand has 2 fingers"):
         env.reset(seed=0)
     assert closed == [1] and env.hand is None
+
+
+@pytest.mark.parametrize("name, option", [("handwriting", "word = 'SCIENCE'"),
+                                          ("maze", "n_runs = "), ("cups", "n_cups = ")])
+def test_task_help_lists_the_tasks_options(name, option, capsys):
+    """`vlr task NAME --help`: the command's flags, then the task's options (--option) with
+    their defaults, its own and its base's."""
+    from vlr.cli import main
+
+    with pytest.raises(SystemExit) as done:
+        main(["task", name, "--help"])
+    assert done.value.code == 0
+    out = capsys.readouterr().out
+    head, sep, tail = out.partition(f"{name}'s options")
+    assert "--option KEY=VALUE" in head and sep
+    assert option in tail and "particles = 3000" in tail
