@@ -50,7 +50,7 @@ def train(steps: int, path: Path, seed: int = 0, word: str = "I") -> Path:
     ppo = _ppo()
     import gymnasium as gym
 
-    import tasks  # noqa: F401  (registers the environments)
+    from vlr import tasks  # noqa: F401  (registers the environments)
 
     env = gym.make("vlr/Handwriting-v1", identify=False, word=word)
     n_steps = min(64, max(8, steps))

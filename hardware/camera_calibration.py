@@ -499,7 +499,7 @@ def run(args: argparse.Namespace) -> int:
         if args.images is not None:
             views, width, height = views_from_folder(args.images, detector, args.min_views)
         else:
-            from hardware.camera import OpenCVCamera
+            from vlr.hardware.camera import OpenCVCamera
 
             # OpenCV logs each backend it tries on a bad index; CameraError says it in a line.
             level = cv2.utils.logging.getLogLevel()

@@ -18,9 +18,9 @@ from pathlib import Path
 import mujoco
 import numpy as np
 from dm_control import mjcf
+from vlr.models.make_tags import TEXTURE_PER_BLACK, tag_path, write_tag
+from vlr.sim.pads import ROLL_FRICTION, SLIDE_FRICTION, TORSION_FRICTION
 
-from models.make_tags import TEXTURE_PER_BLACK, tag_path, write_tag
-from sim.pads import ROLL_FRICTION, SLIDE_FRICTION, TORSION_FRICTION
 from vlr.spec import FingerSpec, HandSpec, ObjectSpec, SpecError
 
 # Contact model for stable fingertip grasps (docs/METHOD.md 8.2, models/README.md "Contacts").

@@ -36,9 +36,8 @@ os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from dm_control import mjcf  # noqa: E402
-
-from sim.backend import SimHand, SimOptions  # noqa: E402
-from sim.model import (  # noqa: E402
+from vlr.sim.backend import SimHand, SimOptions  # noqa: E402
+from vlr.sim.model import (  # noqa: E402
     SOLREF,
     TAG_CARD_THICKNESS,
     build_hand,
@@ -46,6 +45,7 @@ from sim.model import (  # noqa: E402
     build_scene,
     cup_dimensions,
 )
+
 from vlr.hand import ApplyReport, GraspError  # noqa: E402
 from vlr.spec import HandSpec, ObjectSpec, load_object  # noqa: E402
 

@@ -1,8 +1,11 @@
 """Gymnasium environments of precise in-hand manipulation (docs/METHOD.md 5-6), registered on
 import under the `vlr/` namespace:
 
-    import gymnasium, tasks
-    env = gymnasium.make("vlr/Handwriting-v1", backend="sim")
+    import gymnasium as gym
+    import vlr.tasks
+
+    gym.register_envs(vlr.tasks)
+    env = gym.make("vlr/Handwriting-v1", backend="sim")
 
 | id | task | max_episode_steps |
 |---|---|---|
@@ -27,11 +30,11 @@ MARBLE_MAZE = "vlr/MarbleMaze-v1"
 CUP_STACKING = "vlr/CupStacking-v1"
 
 # One table: id -> (entry point, max_episode_steps); entry points are strings, so that
-# importing `tasks` stays cheap.
+# importing `vlr.tasks` stays cheap.
 ENVIRONMENTS: dict[str, tuple[str, int]] = {
-    HANDWRITING: ("tasks.handwriting:HandwritingEnv", 49 * 12),
-    MARBLE_MAZE: ("tasks.maze:MarbleMazeEnv", 5 * 15),
-    CUP_STACKING: ("tasks.cups:CupStackingEnv", 4 * 20),
+    HANDWRITING: ("vlr.tasks.handwriting:HandwritingEnv", 49 * 12),
+    MARBLE_MAZE: ("vlr.tasks.maze:MarbleMazeEnv", 5 * 15),
+    CUP_STACKING: ("vlr.tasks.cups:CupStackingEnv", 4 * 20),
 }
 
 for _id, (_entry, _steps) in ENVIRONMENTS.items():

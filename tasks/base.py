@@ -413,7 +413,7 @@ class HandTaskEnv(gym.Env):
         if self.render_mode != "rgb_array" or self.hand is None:
             return None
         if self.backend == "sim":
-            from sim.camera import render_scene
+            from vlr.sim.camera import render_scene
 
             return render_scene(self.hand)
         frame = self.hand.grab_frame()
@@ -476,7 +476,7 @@ class HandTaskEnv(gym.Env):
     def baseline(self, **changes: Any):
         """The VLR baseline policy for this env (`tasks.baseline.VLRBaseline`), with optional
         changes to the task's controller settings (e.g. method="transpose")."""
-        from tasks.baseline import VLRBaseline
+        from vlr.tasks.baseline import VLRBaseline
 
         return VLRBaseline(self, **changes)
 

@@ -2,9 +2,9 @@
 id, at its defaults and with `identify=False`, beside `vlr bench`'s yardstick measured in the
 same run (docs/TASKS.md, "Cost").
 
-    python -m tasks.cost                       # every id, seeds 0-2, 3 steps per reset
-    python -m tasks.cost --ids vlr/Handwriting-v1 --seeds 5
-    python -m tasks.cost --particles 5000 --identify-iterations 15   # another identification
+    python -m vlr.tasks.cost                       # every id, seeds 0-2, 3 steps per reset
+    python -m vlr.tasks.cost --ids vlr/Handwriting-v1 --seeds 5
+    python -m vlr.tasks.cost --particles 5000 --identify-iterations 15   # another identification
 """
 
 from __future__ import annotations
@@ -37,10 +37,11 @@ def env_cost(env_id: str, seeds: int, steps: int, **make_kwargs) -> tuple[float,
 
 
 def main(argv: list[str] | None = None) -> int:
-    import tasks
+    from vlr import tasks
     from vlr.commands.bench import yardstick
 
-    p = argparse.ArgumentParser(prog="python -m tasks.cost", description=__doc__.split("\n\n")[0])
+    p = argparse.ArgumentParser(prog="python -m vlr.tasks.cost",
+                                description=__doc__.split("\n\n")[0])
     p.add_argument("--ids", nargs="+", default=list(tasks.ENVIRONMENTS),
                    help="registered ids (default: every one)")
     p.add_argument("--seeds", type=int, default=3, help="resets per id (seeds 0..N-1)")

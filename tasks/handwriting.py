@@ -21,9 +21,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from vlr.tasks.base import HandTaskEnv, save_figure
+from vlr.tasks.letters import letter_waypoints
 
-from tasks.base import HandTaskEnv, save_figure
-from tasks.letters import letter_waypoints
 from vlr.controller import ControllerConfig
 
 __all__ = ["Waypoint", "HandwritingEnv"]

@@ -15,10 +15,10 @@ import cv2
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
+from vlr.models.make_tags import TEXTURE_PER_BLACK, tag_image
+from vlr.sim.camera_effects import CameraEffects, apply_effects, distortion_maps
+from vlr.sim.model import CAMERA_FOVY_DEG, CAMERA_HEIGHT
 
-from models.make_tags import TEXTURE_PER_BLACK, tag_image
-from sim.camera_effects import CameraEffects, apply_effects, distortion_maps
-from sim.model import CAMERA_FOVY_DEG, CAMERA_HEIGHT
 from vlr.camera import CameraCalibration, calibration_from_mujoco_camera, load_calibration
 from vlr.cli import main
 from vlr.perception import lens
@@ -208,8 +208,8 @@ def test_calibrates_rendered_views_from_a_folder(rendered, tmp_path, capsys) -> 
 
 def test_live_camera_keeps_moving_views_until_covered(rendered, tmp_path, monkeypatch,
                                                        capsys) -> None:
-    import hardware.camera_calibration as cc
-    from hardware.camera import FakeCamera
+    import vlr.hardware.camera_calibration as cc
+    from vlr.hardware.camera import FakeCamera
 
     board = [cv2.imread(str(p)) for p in sorted(rendered["views"].iterdir())]
     tag = cv2.imread(str(rendered["tag"]))
@@ -219,7 +219,7 @@ def test_live_camera_keeps_moving_views_until_covered(rendered, tmp_path, monkey
     def source():
         return cv2.cvtColor(next(frames), cv2.COLOR_BGR2RGB)
 
-    monkeypatch.setattr("hardware.camera.OpenCVCamera",
+    monkeypatch.setattr("vlr.hardware.camera.OpenCVCamera",
                         lambda index, width=None, height=None: FakeCamera(source=source))
     monkeypatch.setattr("builtins.input", lambda prompt="": "")
     monkeypatch.setattr(cc, "TAG_TIMEOUT_S", 30.0)

@@ -87,7 +87,7 @@ def _shell_commands(block: str, first_line: int, where: str) -> list[Shown]:
 
 def shown_commands() -> list[Shown]:
     """Every command and Python block of the docs, in order, then `vlr demo`'s hints."""
-    from sim.demo import NEXT_COMMANDS
+    from vlr.sim.demo import NEXT_COMMANDS
 
     found = []
     for doc in DOCS:

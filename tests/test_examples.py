@@ -19,7 +19,7 @@ def test_compare_policies_prints_one_table_with_every_policy(tmp_path, capsys):
                         "--out", str(tmp_path)]) == 0
     table = capsys.readouterr().out.split("the policies side by side")[1]
     assert "| handwriting | 0 |" in table, table       # the baseline's row
-    for policy in ("compare_policies.py:goal_step", "tasks.examples:hold"):
+    for policy in ("compare_policies.py:goal_step", "vlr.tasks.examples:hold"):
         assert f"| handwriting, policy {policy} | 0 |" in table, table
 
 

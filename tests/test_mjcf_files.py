@@ -1,4 +1,4 @@
-"""The committed MJCF files (models/mjcf/) are what `python -m models.make_mjcf` writes today,
+"""The committed MJCF files (models/mjcf/) are what `python -m vlr.models.make_mjcf` writes today,
 compile to the sim's own model, and load and step on their own."""
 
 from __future__ import annotations
@@ -6,9 +6,8 @@ from __future__ import annotations
 import mujoco
 import numpy as np
 import pytest
-
-from models import make_mjcf
-from models.make_mjcf import HANDS, OUT_DIR, scene_pairs
+from vlr.models import make_mjcf
+from vlr.models.make_mjcf import HANDS, OUT_DIR, scene_pairs
 
 SCENES = [f"scene_{h}_{o}.xml" for h, o in scene_pairs()]
 # Fields that name things or hold the keyframe: the files add the `home` key and a scene's
@@ -21,14 +20,15 @@ _NAMING = ("name_", "names", "nnames", "nbuffer", "npaths", "paths", "signature"
 def test_committed_files_are_what_the_script_writes():
     expected = make_mjcf.generate()
     committed = {p.name: p.read_text() for p in sorted(OUT_DIR.glob("*.xml"))}
-    assert sorted(committed) == sorted(expected), "run `python -m models.make_mjcf`"
+    assert sorted(committed) == sorted(expected), "run `python -m vlr.models.make_mjcf`"
     stale = [name for name, text in expected.items() if committed[name] != text]
-    assert not stale, f"{stale} differ from the generator: run `python -m models.make_mjcf`"
+    assert not stale, f"{stale} differ from the generator: run `python -m vlr.models.make_mjcf`"
 
 
 @pytest.mark.parametrize("hand, obj", scene_pairs(), ids=[s[6:-4] for s in SCENES])
 def test_scene_file_compiles_to_the_sims_model(hand, obj):
-    from sim.model import build_scene, compile_scene
+    from vlr.sim.model import build_scene, compile_scene
+
     from vlr.spec import load_hand, load_object
 
     ours = mujoco.MjModel.from_xml_path(str(OUT_DIR / f"scene_{hand}_{obj}.xml"))

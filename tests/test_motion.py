@@ -219,7 +219,7 @@ def test_reanchoring_keeps_the_grasp_force(modelo):
     assert np.degrees(np.abs(zeroed.theta - theta0).max()) > 0.003  # it relaxes
 
 
-# The sim's pads' friction (`sim.pads`): sliding mu 1, torsional mu_t 1 mm.
+# The sim's pads' friction (`vlr.sim.pads`): sliding mu 1, torsional mu_t 1 mm.
 FRICTION = PadFriction(slide=1.0, spin=0.001)
 
 

@@ -20,8 +20,8 @@ import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
 
-import tasks
 from tests.env_rollout import rollout, same
+from vlr import tasks
 
 FAST = {
     tasks.HANDWRITING: {"identify": False, "word": "I"},

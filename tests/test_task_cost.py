@@ -1,9 +1,9 @@
-"""`python -m tasks.cost`: the environments' reset and step costs (docs/TASKS.md, "Cost")."""
+"""`python -m vlr.tasks.cost`: the environments' reset and step costs (docs/TASKS.md, "Cost")."""
 
 import numpy as np
+from vlr.tasks.cost import env_cost, main
 
-import tasks
-from tasks.cost import env_cost, main
+from vlr import tasks
 
 
 def test_a_cost_is_measured_per_reset_and_step():

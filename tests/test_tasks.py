@@ -13,10 +13,10 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from vlr.tasks.letters import STROKES, letter_waypoints
 
-import tasks
-from tasks.letters import STROKES, letter_waypoints
 from tests.extras import needs_hardware
+from vlr import tasks
 
 QUICK = {"particles": 1000, "identify_iterations": 1}
 # The hardware backend's example: emulated motors driving the simulated hand.
@@ -101,9 +101,9 @@ def test_task_summary_keeps_each_policy_on_its_own_rows():
     assert len(rows) == 2
     assert rows[0].startswith("| maze | 0,1 | orientation error 0.30 +- 0.10 deg"), rows
     assert rows[1].startswith("| maze, policy mine.py:make | 0 | orientation error 3.00"), rows
-    csv = summary_csv([run(0, 0.2), run(0, 3.0, "tasks.examples:hold")]).splitlines()
+    csv = summary_csv([run(0, 0.2), run(0, 3.0, "vlr.tasks.examples:hold")]).splitlines()
     assert csv[0].endswith(",policy") and csv[1].endswith(",baseline")
-    assert csv[2].endswith(",tasks.examples:hold")
+    assert csv[2].endswith(",vlr.tasks.examples:hold")
 
 
 def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
@@ -151,10 +151,10 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
              "--config", "x.yaml"], "one hand"),
            (["handwriting", "--policy", "hold"], "MODULE:NAME"),
            (["handwriting", "--policy", "no_such_module:hold"], "importing 'no_such_module'"),
-           (["handwriting", "--policy", "tasks.examples:no_such_policy"], "has no"),
-           (["handwriting", "--policy", "tasks.examples:ROWS"], "not callable"),
+           (["handwriting", "--policy", "vlr.tasks.examples:no_such_policy"], "has no"),
+           (["handwriting", "--policy", "vlr.tasks.examples:ROWS"], "not callable"),
            (["handwriting", "--policy", str(tmp_path / "missing.py") + ":make"], "no file"),
-           (["handwriting", "--policy", "tasks.examples:hold", "--alpha", "2"],
+           (["handwriting", "--policy", "vlr.tasks.examples:hold", "--alpha", "2"],
             "do not apply")]
     for argv, message in bad:
         assert main(["task", *argv, "--out", str(tmp_path / "out")]) == 2, argv
@@ -179,7 +179,8 @@ def test_a_grasp_guess_of_the_wrong_size_is_one_line(tmp_path, capsys):
 def test_the_backends_defaults_and_the_users_settings_reach_the_tasks_filter():
     """The identification in reset is the sim backend's, as `vlr identify`'s (rolling
     contacts, its likelihood with the turn term); the env's `settings` override it."""
-    from tasks.handwriting import HandwritingEnv
+    from vlr.tasks.handwriting import HandwritingEnv
+
     from vlr.settings import load_settings
 
     sim = load_settings({"world.backend": "sim"}).filter
@@ -207,7 +208,7 @@ def test_the_users_grasp_guess_centres_the_tasks_prior():
     `filter.theta_spread_deg`) reach the identification in reset, and the sim's default
     guess identifies the apple grasp where the generic guess does not (ground truth read
     after the fact, for scoring: docs/TASKS.md)."""
-    from tasks.handwriting import HandwritingEnv
+    from vlr.tasks.handwriting import HandwritingEnv
 
     errors = {}
     for guess, spread in (((-10.0, 15.0), 10.0), (None, 3.0)):
@@ -224,8 +225,8 @@ def test_the_users_grasp_guess_centres_the_tasks_prior():
             env.close()
     # every task, and a new one, identifies from the sim's guess with rolling contacts, the
     # maze's without which its filter cannot follow the holder (docs/TASKS.md)
-    from tasks.base import HandTaskEnv
-    from tasks.maze import MarbleMazeEnv
+    from vlr.tasks.base import HandTaskEnv
+    from vlr.tasks.maze import MarbleMazeEnv
 
     for env in (HandwritingEnv(), MarbleMazeEnv(), HandTaskEnv()):
         tree = env.identification_settings(0).filter
@@ -237,7 +238,7 @@ def test_the_users_grasp_guess_centres_the_tasks_prior():
 
 
 def test_a_command_band_may_give_each_tendon_its_own_limits():
-    from tasks.handwriting import HandwritingEnv
+    from vlr.tasks.handwriting import HandwritingEnv
 
     env = HandwritingEnv(command_band=((0.5e-3, 0.25e-3, 0.25e-3), 1e-3))
     release, pull = env.command_band
@@ -301,7 +302,8 @@ def test_a_hand_without_three_tendons_is_refused_in_reset(monkeypatch):
     UserError at reset, and the hand is closed again."""
     from types import SimpleNamespace
 
-    from tasks.handwriting import HandwritingEnv
+    from vlr.tasks.handwriting import HandwritingEnv
+
     from vlr.errors import UserError
 
     closed = []

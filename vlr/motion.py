@@ -218,7 +218,7 @@ class PadFriction:
 
     Friction acts on a command change (`MotionModel.solve(..., u_from=)`) only: a settle has
     no history, so its contacts stick and spin freely. The sim's pads have mu 1.0 and mu_t
-    1 mm (`sim.pads`).
+    1 mm (`vlr.sim.pads`).
     """
 
     slide: float = math.inf

@@ -20,9 +20,9 @@ returns the policy, a callable from the observation to the action (the three ten
 [m]), as `env.unwrapped.baseline()` does. An action that is not three finite numbers ends
 the run with one line naming the policy, the step and the value.
 
-The environments live in the `tasks` package, which plugs in through the `vlr.tasks`
-entry-point group (pyproject.toml), as backends do: `vlr` never imports `tasks`, `sim` or
-`hardware` itself.
+The environments live in the `vlr.tasks` package, which plugs in through the `vlr.tasks`
+entry-point group (pyproject.toml), as backends do: the core never imports `vlr.tasks`,
+`vlr.sim` or `vlr.hardware` itself.
 """
 
 from __future__ import annotations
