@@ -1,37 +1,27 @@
 """`vlr camera-calibrate` on MuJoCo renders of the printed board and a tag, seen by a palm
 camera with the model's field of view and resolution, a mounting error, lens distortion and
-sensor noise; the truth comes from the MJCF camera (vlr.camera.calibration_from_mujoco_camera)
-and the distortion put on the frames (sim.camera_effects), not from the calibration code."""
+sensor noise (vlr.sim.calibration_views); the truth comes from the MJCF camera
+(vlr.camera.calibration_from_mujoco_camera) and the distortion put on the frames
+(sim.camera_effects), not from the calibration code."""
 
 from __future__ import annotations
 
-import math
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
-from vlr.models.make_tags import TEXTURE_PER_BLACK, tag_image
-from vlr.sim.camera_effects import CameraEffects, apply_effects, distortion_maps
-from vlr.sim.model import CAMERA_FOVY_DEG, CAMERA_HEIGHT
 
-from vlr.camera import CameraCalibration, calibration_from_mujoco_camera, load_calibration
+from vlr.camera import load_calibration
 from vlr.cli import main
 from vlr.perception import lens
 
 WIDTH, HEIGHT = 640, 480
-DISTORTION = (-0.12, 0.03, 4e-4, -3e-4, 0.0)
-NOISE = 1.5                                   # grey levels
-MARGIN = (48, 36)                             # px rendered beyond each side, see `rendered`
 SQUARE, SQUARES = 0.012, (7, 5)               # the command's default board
 DPI = 254                                     # 120 px per 12 mm square
-# The camera is mounted 1.5 mm and 1 mm off the palm axis and tilted by about 2 degrees.
-CAMERA_POS = (0.0015, -0.001, CAMERA_HEIGHT)
-CAMERA_TILT_DEG = (1.5, -1.2, 0.8)
 TAG_ID, TAG_SIZE = 7, 0.02
 TAG_POSE = (0.003, -0.004, 0.065, 4.0, -6.0, 25.0)  # palm frame: m, rotation vector deg
 # Board poses in the palm: centre (x, y, z) [m] and rotation vector [deg] (identity: facing
@@ -54,101 +44,37 @@ TAG_ARGS = ["--tag-id", str(TAG_ID), "--tag-size", str(TAG_SIZE),
             "--tag-pose", *map(str, TAG_POSE)]
 
 
-def _scene_xml(board_png: Path, board_size: tuple[float, float], tag_png: Path, fovy: float,
-               width: int, height: int) -> str:
-    cam_quat = (Rotation.from_rotvec(CAMERA_TILT_DEG, degrees=True)
-                * Rotation.from_euler("x", 180, degrees=True)).as_quat(scalar_first=True)
-    side = TAG_SIZE * TEXTURE_PER_BLACK
-    # Emissive, unlit materials: the texture's grey levels reach the image unshaded. Each
-    # card is a thin box turned by pi about x so that its textured face, at z = 0 of its body,
-    # looks at the camera unmirrored (as sim/model.py does for the object tags).
-    return f"""<mujoco>
-      <visual><headlight ambient="0 0 0" diffuse="0 0 0" specular="0 0 0"/>
-        <quality offsamples="8"/><global offwidth="{width}" offheight="{height}"/></visual>
-      <asset>
-        <texture name="board" type="2d" file="{board_png}"/>
-        <texture name="tag" type="2d" file="{tag_png}"/>
-        <material name="board" texture="board" emission="1" specular="0" rgba="1 1 1 1"/>
-        <material name="tag" texture="tag" emission="1" specular="0" rgba="1 1 1 1"/>
-      </asset>
-      <worldbody>
-        <camera name="palm_camera" pos="{' '.join(map(str, CAMERA_POS))}"
-                quat="{' '.join(map(str, cam_quat))}" fovy="{fovy!r}"/>
-        <body name="board" mocap="true" pos="0 0 -1">
-          <geom type="box" size="{board_size[0] / 2} {board_size[1] / 2} 0.0005"
-                pos="0 0 0.0005" quat="0 1 0 0" material="board"/>
-        </body>
-        <body name="tag" mocap="true" pos="0 0 -1">
-          <geom type="box" size="{side / 2} {side / 2} 0.0005" pos="0 0 0.0005"
-                quat="0 1 0 0" material="tag"/>
-        </body>
-      </worldbody></mujoco>"""
-
-
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
-    """Board views and a tag image as the distorting, noisy palm camera sees them, and the
-    true calibration: {"views": DIR, "tag": FILE, "board": FILE, "truth": CameraCalibration}.
-
-    A barrel lens's image corners see rays from outside the pinhole field of view, so the
-    scene is rendered MARGIN px larger on each side at the same focal length (a wider fovy);
-    each output pixel then reads that render at its undistorted position (the maps of
-    sim.camera_effects, shifted by the margin) and the sensor adds noise."""
+    """Board views at BOARD_POSES and a tag image as the distorting, noisy palm camera sees
+    them (the lens and noise of calibration_views.DEFAULT_EFFECTS), and the true calibration:
+    {"views": DIR, "tag": FILE, "truth": CameraCalibration}."""
     os.environ.setdefault("MUJOCO_GL", "egl")
-    mujoco = pytest.importorskip("mujoco")
+    views_module = pytest.importorskip("vlr.sim.calibration_views")
+    from vlr.hardware.camera_calibration import BoardSpec
+
     root = tmp_path_factory.mktemp("camcal")
     board_png = root / "board.png"
     assert main(["camera-calibrate", "--print-board", str(board_png), "--dpi", str(DPI)]) == 0
-    tex = cv2.imread(str(board_png), cv2.IMREAD_GRAYSCALE)
     pps = round(SQUARE / 0.0254 * DPI)
-    assert tex.shape == ((SQUARES[1] + 1) * pps, (SQUARES[0] + 1) * pps)  # half-square margin
-    board_size = (tex.shape[1] / pps * SQUARE, tex.shape[0] / pps * SQUARE)
-    tag_png = root / "tag_texture.png"
-    cv2.imwrite(str(tag_png), tag_image(TAG_ID))
-    mx, my = MARGIN
-    wide_w, wide_h = WIDTH + 2 * mx, HEIGHT + 2 * my
-    f = (HEIGHT / 2) / math.tan(math.radians(CAMERA_FOVY_DEG) / 2)
-    wide_fovy = math.degrees(2 * math.atan((wide_h / 2) / f))
-    model = mujoco.MjModel.from_xml_string(
-        _scene_xml(board_png, board_size, tag_png, wide_fovy, wide_w, wide_h))
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    wide = calibration_from_mujoco_camera(float(model.cam_fovy[0]), wide_w, wide_h,
-                                          data.cam_xpos[0], data.cam_xmat[0].reshape(3, 3))
-    K = wide.K.copy()
-    K[:2, 2] -= MARGIN  # the output is the render's centre crop
-    truth = CameraCalibration(WIDTH, HEIGHT, K, np.asarray(DISTORTION), wide.T_palm_cam)
-    map_x, map_y = distortion_maps(K, DISTORTION, WIDTH, HEIGHT)
-    map_x, map_y = map_x + np.float32(mx), map_y + np.float32(my)
-    noise = CameraEffects(noise_std=NOISE)
-    rng = np.random.default_rng(0)
+    # The printed board is the one rendered: squares and a half-square margin.
+    assert cv2.imread(str(board_png), cv2.IMREAD_GRAYSCALE).shape == \
+        ((SQUARES[1] + 1) * pps, (SQUARES[0] + 1) * pps)
+    assert pps == views_module.PIXELS_PER_SQUARE
+    tag = views_module.SimTag(TAG_ID, TAG_SIZE, TAG_POSE)
     try:
-        renderer = mujoco.Renderer(model, wide_h, wide_w)
-    except Exception as exc:  # no EGL on this machine
-        pytest.skip(f"MuJoCo offscreen rendering unavailable: {exc}")
-    away = np.array([0.0, 0.0, -1.0])  # behind the camera
-
-    def shot(board_pose, tag_pose) -> np.ndarray:
-        for mocap, pose in ((0, board_pose), (1, tag_pose)):
-            pos, rotvec = pose if pose is not None else (away, (0, 0, 0))
-            data.mocap_pos[mocap] = pos
-            data.mocap_quat[mocap] = Rotation.from_rotvec(rotvec, degrees=True).as_quat(
-                scalar_first=True)
-        mujoco.mj_forward(model, data)
-        renderer.update_scene(data, camera="palm_camera")
-        image = cv2.remap(renderer.render(), map_x, map_y, cv2.INTER_LINEAR)
-        return cv2.cvtColor(apply_effects(image, noise, rng, truth), cv2.COLOR_RGB2BGR)
-
+        sim = views_module.render_board_views(BoardSpec().board(), BOARD_POSES, tag=tag,
+                                              seed=0)
+    except views_module.RenderingUnavailable as exc:
+        pytest.skip(str(exc))
+    assert (sim.truth.width, sim.truth.height) == (WIDTH, HEIGHT)
     views = root / "views"
     views.mkdir()
-    try:
-        for k, pose in enumerate(BOARD_POSES):
-            cv2.imwrite(str(views / f"view_{k:02d}.png"), shot(pose, None))
-        tag = root / "tag.png"
-        cv2.imwrite(str(tag), shot(None, (TAG_POSE[:3], TAG_POSE[3:])))
-    finally:
-        renderer.close()
-    return {"views": views, "tag": tag, "board": board_png, "truth": truth}
+    for k, image in enumerate(sim.boards):
+        cv2.imwrite(str(views / f"view_{k:02d}.png"), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+    tag_png = root / "tag.png"
+    cv2.imwrite(str(tag_png), cv2.cvtColor(sim.tag, cv2.COLOR_RGB2BGR))
+    return {"views": views, "tag": tag_png, "truth": sim.truth}
 
 
 def _errors(cal, truth) -> dict[str, float]:
@@ -301,3 +227,4 @@ def test_command_line_error_exits_2_without_traceback(tmp_path) -> None:
     assert proc.stderr.strip().splitlines() == [
         f"vlr camera-calibrate: error: --images {empty}: no images "
         "(.png, .jpg, .jpeg, .bmp, .tif, .tiff) in it"]
+
