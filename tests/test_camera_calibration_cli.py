@@ -7,6 +7,7 @@ sensor noise (vlr.sim.calibration_views); the truth comes from the MJCF camera
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 
@@ -228,3 +229,126 @@ def test_command_line_error_exits_2_without_traceback(tmp_path) -> None:
         f"vlr camera-calibrate: error: --images {empty}: no images "
         "(.png, .jpg, .jpeg, .bmp, .tif, .tiff) in it"]
 
+
+# --------------------------------------------------------------------------- --sim
+
+def _sim_table(text: str) -> dict[str, float]:
+    """The --sim table's signed errors: fx..cy [%], k1..k3, and the lens and pose lines."""
+    out = {m[0]: float(m[1]) for m in re.findall(r"^  (f[xy]|c[xy]) \[px\] .* ([+-][\d.]+)%$",
+                                                 text, re.M)}
+    out |= {m[0]: float(m[1]) for m in re.findall(r"^  (k1|k2|p1|p2|k3) .* ([+-][\d.]+)$",
+                                                  text, re.M)}
+    lens_line = re.search(r"max ([\d.]+) where the board was seen, ([\d.]+) anywhere", text)
+    pose = re.search(r"camera in the palm: ([\d.]+) mm and ([\d.]+) deg off", text)
+    out |= {"lens_seen_px": float(lens_line[1]), "lens_max_px": float(lens_line[2]),
+            "position_mm": float(pose[1]), "rotation_deg": float(pose[2])}
+    return out
+
+
+def test_sim_calibrates_its_own_views_against_the_known_camera(rendered, tmp_path,
+                                                                capsys) -> None:
+    """`--sim` at its defaults: the YAML written, the printed errors are the YAML's errors
+    against the camera the views were rendered with (the fixture's truth: the same mounting,
+    lens and size), and they are small."""
+    out = tmp_path / "camera.yaml"
+    assert main(["camera-calibrate", "--sim", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "view 15 (view_015.png)" in text
+    cal = load_calibration(out)
+    truth = rendered["truth"]
+    assert (cal.width, cal.height) == (WIDTH, HEIGHT)
+    err = _errors(cal, truth)
+    table = _sim_table(text)
+    print(text, {k: round(v, 6) for k, v in err.items()}, sep="\n")
+    for key, rc in {"fx": (0, 0), "fy": (1, 1), "cx": (0, 2), "cy": (1, 2)}.items():
+        assert table[key] == pytest.approx(100 * (cal.K[rc] / truth.K[rc] - 1), abs=6e-4)
+    for k, name in enumerate(("k1", "k2", "p1", "p2", "k3")):
+        assert table[name] == pytest.approx(cal.dist[k] - truth.dist[k], abs=6e-6)
+    assert table["position_mm"] == pytest.approx(err["position_mm"], abs=6e-4)
+    assert table["rotation_deg"] == pytest.approx(err["rotation_deg"], abs=6e-4)
+    _assert_accurate(err)
+    assert table["lens_seen_px"] < 1.0 and table["lens_max_px"] < 5.0
+    assert _distortion_gap_px(cal, truth, 300.0) < 1.0
+    assert "# --sim --seed 0: fx " in out.read_text()
+    assert [p.name for p in tmp_path.iterdir()] == ["camera.yaml"]
+
+
+def test_sim_is_seeded_and_its_views_calibrate_the_same_from_a_folder(rendered, tmp_path,
+                                                                       capsys) -> None:
+    def sim(name: str, *extra: str) -> tuple[str, object]:
+        out = tmp_path / name
+        assert main(["camera-calibrate", "--sim", "--sim-views", "10", *extra, "--out",
+                     str(out)]) == 0
+        text = capsys.readouterr().out
+        table = text[text.index("against the sim's truth"):text.index("wrote ")]
+        return table, load_calibration(out)
+
+    saved = tmp_path / "views"
+    table, cal = sim("a.yaml", "--save-views", str(saved))
+    again, cal_again = sim("b.yaml")
+    assert again == table
+    assert (tmp_path / "a.yaml").read_text() == (tmp_path / "b.yaml").read_text()
+    other, cal_other = sim("c.yaml", "--seed", "1")
+    assert other != table and not np.array_equal(cal_other.K, cal.K)
+    _assert_accurate(_errors(cal_other, rendered["truth"]))
+
+    # The saved views through --images: the same detection and calibration, the same camera.
+    assert sorted(p.name for p in saved.iterdir()) == [f"view_{k:03d}.png" for k in
+                                                       range(1, 11)]
+    assert main(["camera-calibrate", "--images", str(saved), "--out",
+                 str(tmp_path / "a.yaml")]) == 0
+    np.testing.assert_array_equal(load_calibration(tmp_path / "a.yaml").K, cal.K)
+    np.testing.assert_array_equal(load_calibration(tmp_path / "a.yaml").dist, cal.dist)
+
+
+@pytest.mark.parametrize("extra, named", [
+    (["--images", "views"], "--images views and --sim: give one source"),
+    (["--camera", "0"], "--camera 0 and --sim: give one source"),
+    (["--sim-views", "5"], "--sim-views 5: must be from --min-views (10) to 200"),
+    (["--sim-views", "12", "--min-views", "13"], "--sim-views 12: must be from --min-views"),
+    (["--sim-views", "500"], "--sim-views 500:"),
+    (["--tag-image", "tag.png"], "--tag-image tag.png: --sim renders its own tag view"),
+    (["--width", "320", "--height", "240"], "--width 320 --height 240: --sim renders"),
+    (["--tag-size", "-1"], "--tag-size -1.0: must be a length > 0"),
+    (["--seed", "-1"], "--seed -1: must be 0 or more"),
+])
+def test_sim_bad_input_is_one_line_and_no_file(extra, named, tmp_path, capsys) -> None:
+    out = tmp_path / "camera.yaml"
+    assert main(["camera-calibrate", "--sim", *extra, "--out", str(out)]) == 2
+    assert named in _error_line(capsys)
+    assert not out.exists()
+
+
+def test_sim_without_rendering_is_one_line(tmp_path, monkeypatch, capsys) -> None:
+    pytest.importorskip("mujoco")
+
+    def no_egl(*args, **kwargs):
+        raise RuntimeError("cannot initialize EGL\nno display")
+
+    monkeypatch.setattr("mujoco.Renderer", no_egl)
+    out = tmp_path / "camera.yaml"
+    assert main(["camera-calibrate", "--sim", "--out", str(out)]) == 2
+    assert "MuJoCo cannot render offscreen here" in _error_line(capsys)
+    monkeypatch.setitem(sys.modules, "vlr.sim.calibration_views", None)  # import fails
+    assert main(["camera-calibrate", "--sim", "--out", str(out)]) == 2
+    assert "--sim needs MuJoCo rendering" in _error_line(capsys)
+    assert not out.exists()
+
+
+def test_sources_clash_in_one_line_without_usage(tmp_path) -> None:
+    proc = subprocess.run([sys.executable, "-m", "vlr.cli", "camera-calibrate", "--sim",
+                           "--images", str(tmp_path), "--out", str(tmp_path / "c.yaml")],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        f"vlr camera-calibrate: error: --images {tmp_path} and --sim: give one source of "
+        "board views (--images, --camera or --sim)"]
+
+
+def test_hardware_side_does_not_import_the_sim() -> None:
+    code = ("import sys, vlr.hardware.camera_calibration, vlr.hardware.camera; "
+            "print(sorted(m for m in sys.modules if m.startswith('vlr.sim') or m == 'mujoco'))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "[]"
