@@ -4,7 +4,7 @@
     python examples/sb3_agent.py                    # train briefly, then compare, one table
     python examples/sb3_agent.py --train-steps 20000 --seeds 0-4
 
-PPO learns on `vlr/Handwriting-v1` as a learner sees it: the goal-conditioned Dict
+PPO learns on `vlr/Handwriting-v2` as a learner sees it: the goal-conditioned Dict
 observation (`MultiInputPolicy`), actions in [-1, 1], rewards from `compute_reward`, and no
 identification in its resets (`identify=False`: a reset is a grasp, so training pays for
 grasps and moves only). The trained agent then runs through `vlr task handwriting --policy
@@ -46,13 +46,13 @@ def _ppo():
 
 
 def train(steps: int, path: Path, seed: int = 0, word: str = "I") -> Path:
-    """PPO on `vlr/Handwriting-v1` without identification in its resets, saved to `path`."""
+    """PPO on `vlr/Handwriting-v2` without identification in its resets, saved to `path`."""
     ppo = _ppo()
     import gymnasium as gym
 
     from vlr import tasks  # noqa: F401  (registers the environments)
 
-    env = gym.make("vlr/Handwriting-v1", identify=False, word=word)
+    env = gym.make("vlr/Handwriting-v2", identify=False, word=word)
     n_steps = min(64, max(8, steps))
     model = ppo("MultiInputPolicy", env, n_steps=n_steps, batch_size=n_steps, n_epochs=4,
                    seed=seed, verbose=0)
