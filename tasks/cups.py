@@ -84,7 +84,7 @@ def _quat(rot: np.ndarray) -> np.ndarray:
 
 
 class CupStackingEnv(HandTaskEnv):
-    """`vlr/CupStacking-v1` (module docstring).
+    """`vlr/CupStacking-v2` (sparse), `vlr/CupStackingDense-v2` (module docstring).
 
     Args (besides `HandTaskEnv`'s):
         n_cups: cups to stack on the target (1-4; the paper: 4).

@@ -39,7 +39,8 @@ class Waypoint:
 
 
 class HandwritingEnv(HandTaskEnv):
-    """`vlr/Handwriting-v1`: the POM writes `word` (default "SCIENCE") under the apple.
+    """`vlr/Handwriting-v2` (sparse), `vlr/HandwritingDense-v2`: the POM writes `word`
+    (default "SCIENCE") under the apple.
 
     Args (besides `HandTaskEnv`'s):
         word: letters to write (from `tasks.letters.STROKES`).

@@ -55,7 +55,7 @@ def axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 class MarbleMazeEnv(HandTaskEnv):
-    """`vlr/MarbleMaze-v1` (module docstring).
+    """`vlr/MarbleMaze-v2` (sparse), `vlr/MarbleMazeDense-v2` (module docstring).
 
     Args (besides `HandTaskEnv`'s):
         tilt_deg: the plate's tilt for each run [deg].

@@ -1,4 +1,4 @@
-"""Cup stacking (`vlr/CupStacking-v1`, tasks/cups.py): the picked cup under the palm, the
+"""Cup stacking (`vlr/CupStacking-v2`, tasks/cups.py): the picked cup under the palm, the
 hardware backend refused in one line, `vlr task cups` writing its result and picture, and
 the nesting physics without the hand (the env checker and same-seed rollouts:
 tests/test_task_conventions.py). One cup instead of four and a short identification keep it

@@ -30,7 +30,7 @@ def test_user_modules_named_like_the_folders_change_nothing(tmp_path):
         from vlr.cli import main
 
         gym.register_envs(vlr.tasks)
-        env = gym.make("vlr/MarbleMaze-v1", identify=False, n_runs=1)
+        env = gym.make("vlr/MarbleMaze-v2", identify=False, n_runs=1)
         env.reset(seed=0)
         env.close()
         assert (models.ROOT / "hands" / "modelo.yaml").is_file()
@@ -48,7 +48,7 @@ def test_user_modules_named_like_the_folders_change_nothing(tmp_path):
 def test_an_id_makes_without_importing_the_package_first(tmp_path):
     """gymnasium's `module:id` form imports the registering module itself."""
     script = ('import gymnasium as gym\n'
-              'env = gym.make("vlr.tasks:vlr/Handwriting-v1", identify=False, word="I")\n'
+              'env = gym.make("vlr.tasks:vlr/Handwriting-v2", identify=False, word="I")\n'
               'print(type(env.unwrapped).__module__)\n')
     out = subprocess.run([sys.executable, "-c", script], cwd=tmp_path, capture_output=True,
                          text=True, timeout=300)

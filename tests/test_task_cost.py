@@ -15,6 +15,7 @@ def test_bad_input_is_one_line(capsys):
     assert main(["--ids", "vlr/Nope-v0"]) == 2
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "'vlr/Nope-v0'" in err
+    assert "vlr/Handwriting-v2" in err and "vlr/HandwritingDense-v2" in err   # every id
     assert main(["--seeds", "0"]) == 2
     assert "--seeds 0" in capsys.readouterr().err
     assert main(["--particles", "5"]) == 2

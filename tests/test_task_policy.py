@@ -68,9 +68,9 @@ def test_the_example_policies_run_and_name_themselves_in_the_summary(tmp_path):
     import gymnasium as gym
     from vlr.tasks.examples import camera_only
 
-    from vlr import tasks  # noqa: F401 - registers the environments
+    from vlr import tasks
 
-    env = gym.make("vlr/Handwriting-v1", particles=200, identify_iterations=3, word="I")
+    env = gym.make(tasks.HANDWRITING, particles=200, identify_iterations=3, word="I")
     try:
         obs, _ = env.reset(seed=0)
         policy = camera_only(env.unwrapped)

@@ -37,6 +37,7 @@ def test_letters_are_single_strokes_with_bounded_spacing():
 def test_environments_are_registered_under_one_namespace():
     for env_id in tasks.ENVIRONMENTS:
         assert env_id.startswith("vlr/") and env_id in gym.registry
+    assert len(tasks.ENVIRONMENTS) == 2 * len(tasks.DENSE) == 6   # sparse and dense per task
 
 
 def test_handwriting_episode_one_letter_seeded_regression(tmp_path):
@@ -51,6 +52,7 @@ def test_handwriting_episode_one_letter_seeded_regression(tmp_path):
                "--option", "word=I", "--out", str(out)])
     assert rc == 0
     result = json.loads((out / "result.json").read_text())
+    assert result["env"] == tasks.HANDWRITING_DENSE      # `vlr task` runs the dense id
     assert (out / "task.png").stat().st_size > 1000
     e = result["errors"]
     assert {"position_mm_mean", "position_mm_sd"} <= e.keys()
@@ -329,3 +331,4 @@ def test_task_help_lists_the_tasks_options(name, option, capsys):
     head, sep, tail = out.partition(f"{name}'s options")
     assert "--option KEY=VALUE" in head and sep
     assert option in tail and "particles = 3000" in tail
+    assert "reward_type = 'dense'" in tail      # the id's own: `vlr task` runs the dense id

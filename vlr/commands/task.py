@@ -22,7 +22,9 @@ the run with one line naming the policy, the step and the value.
 
 The environments live in the `vlr.tasks` package, which plugs in through the `vlr.tasks`
 entry-point group (pyproject.toml), as backends do: the core never imports `vlr.tasks`,
-`vlr.sim` or `vlr.hardware` itself.
+`vlr.sim` or `vlr.hardware` itself. Each task's entry point names its dense id
+(`vlr/HandwritingDense-v2`, ...): the progress bar shows minus the reward, the distance to
+the target; the metrics do not depend on the reward.
 """
 
 from __future__ import annotations
@@ -49,13 +51,15 @@ def _tasks() -> dict[str, object]:
 def env_options(env_id: str) -> dict[str, object]:
     """The environment's own arguments (`--option KEY=VALUE`) and their defaults: the
     keyword parameters of its class's constructor and of the bases it hands **kwargs on to
-    (`inspect`; gymnasium's registry names the class)."""
+    (`inspect`; gymnasium's registry names the class), with the id's own (its spec's
+    kwargs: the dense ids' `reward_type`)."""
     import inspect
 
     import gymnasium as gym
     from gymnasium.envs.registration import load_env_creator
 
-    entry = gym.spec(env_id).entry_point
+    spec = gym.spec(env_id)
+    entry = spec.entry_point
     cls = load_env_creator(entry) if isinstance(entry, str) else entry
     out: dict[str, object] = {}
     for klass in getattr(cls, "__mro__", (cls,)):
@@ -69,6 +73,7 @@ def env_options(env_id: str) -> dict[str, object]:
                 out.setdefault(prm.name, prm.default)
         if not any(prm.kind == prm.VAR_KEYWORD for prm in params):
             break
+    out.update({k: v for k, v in spec.kwargs.items() if k in out})
     return out
 
 
