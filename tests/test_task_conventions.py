@@ -247,7 +247,7 @@ def _at_defaults(env_id: str) -> gym.Env:
     return gym.wrappers.FlattenObservation(gym.make(env_id, max_episode_steps=2))
 
 
-@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("env_id", ALL_IDS)
 def test_forked_workers_run_after_the_parent_used_an_env(env_id):
     """Fork is gymnasium's (and Stable-Baselines3's) default start method on Linux: workers
     forked from a process that has already identified a grasp and rendered its camera (a
