@@ -10,7 +10,7 @@ metrics and result files as the baseline), then one summary puts them side by si
 camera's goals and the commands), never the filter or the truth. It probes with a few random
 moves, fits the goal's response to the tendons by least squares over its own moves, and steps
 towards the desired goal. A learning library's agent is a policy too, a factory that returns
-its `predict`: examples/sb3_agent.py trains Stable-Baselines3's PPO and runs it here.
+its `predict`: examples/sb3_agent.py trains Stable-Baselines3's SAC with HER and runs it here.
 """
 
 from __future__ import annotations
@@ -61,7 +61,7 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--particles", default="2000")
     p.add_argument("--identify-iterations", default="5")
     p.add_argument("--policies", nargs="+",
-                   default=["baseline", f"{HERE}:goal_step", "tasks.examples:hold"],
+                   default=["baseline", f"{HERE}:goal_step", "vlr.tasks.examples:hold"],
                    help="baseline, or MODULE:NAME / FILE.py:NAME factories")
     p.add_argument("--out", default="runs/compare-policies")
     args = p.parse_args(argv)

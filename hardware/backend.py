@@ -42,12 +42,11 @@ from collections.abc import Callable, Iterator
 from typing import Any
 
 import numpy as np
-
-from hardware.bus import HardwareError, MotorBus
-from hardware.calibration import find_zeros
-from hardware.camera import CameraError, FakeCamera, FrameSource, OpenCVCamera
-from hardware.config import EMULATOR_PORT, HardwareConfig, load_config
-from hardware.control_table import (
+from vlr.hardware.bus import HardwareError, MotorBus
+from vlr.hardware.calibration import find_zeros
+from vlr.hardware.camera import CameraError, FakeCamera, FrameSource, OpenCVCamera
+from vlr.hardware.config import EMULATOR_PORT, HardwareConfig, load_config
+from vlr.hardware.control_table import (
     CURRENT_UNIT_MA,
     MODEL_NUMBERS,
     VELOCITY_UNIT_RPM,
@@ -55,13 +54,14 @@ from hardware.control_table import (
     OperatingMode,
     Reg,
 )
-from hardware.tendons import (
+from vlr.hardware.tendons import (
     MotionState,
     TendonMap,
     read_motion,
     resolve_zero,
     wait_until_stopped,
 )
+
 from vlr.camera import CameraCalibration
 from vlr.errors import Interrupted
 from vlr.hand import ApplyReport, Frame, GraspError, check_delta
@@ -514,7 +514,7 @@ def open_hand(*, config: str, **ignored: Any) -> HardwareHand:
         port = None
         plant = None
         if cfg.bus.port == EMULATOR_PORT:
-            from hardware.emulate import build_emulator
+            from vlr.hardware.emulate import build_emulator
 
             emulator, plant = build_emulator(cfg)
             port = emulator.start()

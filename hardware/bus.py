@@ -45,7 +45,7 @@ import threading
 import time
 from collections.abc import Iterable, Mapping, Sequence
 
-from hardware.control_table import (
+from vlr.hardware.control_table import (
     ALERT_BIT,
     MODEL_NUMBERS,
     SDK_BAUD_RATES,
@@ -55,8 +55,9 @@ from hardware.control_table import (
     describe_hardware_error,
     describe_status_error,
 )
-from hardware.errors import HardwareError
-from hardware.protocol2 import BROADCAST_ID, Instruction
+from vlr.hardware.errors import HardwareError
+from vlr.hardware.protocol2 import BROADCAST_ID, Instruction
+
 from vlr.errors import MissingExtra
 
 try:

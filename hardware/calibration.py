@@ -16,10 +16,10 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 
-from hardware.bus import HardwareError, MotorBus
-from hardware.config import CalibrationConfig, FingerMotor
-from hardware.control_table import CURRENT_UNIT_MA, TICKS_PER_REV, Reg
-from hardware.tendons import read_motion, wait_until_stopped
+from vlr.hardware.bus import HardwareError, MotorBus
+from vlr.hardware.config import CalibrationConfig, FingerMotor
+from vlr.hardware.control_table import CURRENT_UNIT_MA, TICKS_PER_REV, Reg
+from vlr.hardware.tendons import read_motion, wait_until_stopped
 
 
 class CalibrationError(HardwareError):

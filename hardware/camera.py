@@ -10,8 +10,7 @@ from collections.abc import Callable
 from typing import Protocol
 
 import numpy as np
-
-from hardware.errors import HardwareError
+from vlr.hardware.errors import HardwareError
 
 
 class CameraError(HardwareError):

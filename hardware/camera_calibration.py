@@ -19,7 +19,13 @@ origin in the palm frame [m] and the frame's rotation vector (axis times angle) 
 The result is the YAML of vlr/camera.py, written atomically and only once it loads; without
 a tag, the extrinsics of an existing `--out` file are kept (intrinsics recalibrated alone).
 
+`--sim` tries it all without a camera: `--sim-views` board views and a tag view rendered by
+the sim's palm camera with a known mounting, lens and sensor noise (vlr.sim.calibration_views,
+imported only then), calibrated as `--images` is, and the result's errors against that
+camera printed and put in the YAML's header.
+
     vlr camera-calibrate --print-board board.png
+    vlr camera-calibrate --sim --out sim_camera.yaml
     vlr camera-calibrate --images views/ --tag-image tag.png --tag-id 0 --tag-size 0.02 \\
         --tag-pose 0 0 0.06 0 0 0 --out camera.yaml
     vlr camera-calibrate --camera 0 --tag-id 0 --tag-size 0.02 --tag-pose 0 0 0.06 0 0 0 \\
@@ -29,6 +35,7 @@ a tag, the extrinsics of an existing `--out` file are kept (intrinsics recalibra
 from __future__ import annotations
 
 import argparse
+import importlib
 import math
 import time
 from collections.abc import Callable, Sequence
@@ -53,8 +60,8 @@ from vlr.perception import detect_tags, observe, to_gray
 
 __all__ = ["BoardSpec", "BoardView", "Coverage", "IntrinsicsFit", "board_image", "calibrate",
            "camera_pose_from_tags", "capture_views", "detect_board", "image_files",
-           "tag_pose_matrix", "views_from_folder", "write_board", "write_calibration",
-           "register", "run"]
+           "tag_pose_matrix", "views_from_folder", "views_from_images", "write_board",
+           "write_calibration", "register", "run"]
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
 MIN_CORNERS = 6            # per view; fewer hardly constrain the view's homography
@@ -62,6 +69,8 @@ GRID = (8, 6)              # coverage cells across x and down y
 MIN_SHIFT = 0.05           # live: the board must move this share of the image diagonal
 NO_FRAME_TIMEOUT_S = 5.0
 TAG_TIMEOUT_S = 60.0
+SIM_VIEWS = 15             # --sim: fx, fy within 0.13% over seeds 0-4 (10 views: 0.19%)
+MAX_SIM_VIEWS = 200
 _N_TAG_IDS = 587           # tag36h11
 
 
@@ -175,6 +184,10 @@ class IntrinsicsFit:
 def calibrate(views: Sequence[BoardView], width: int, height: int) -> IntrinsicsFit:
     """Intrinsics and 5 distortion coefficients from the board views (cv2.calibrateCamera)."""
     criteria = (cv2.TERM_CRITERIA_COUNT | cv2.TERM_CRITERIA_EPS, 200, 1e-12)
+    # One thread: OpenCV's threads sum in varying order, and the same views gave fits 1e-13
+    # apart; one is also no slower here (0.05 s for 30 views, 0.09 s on two threads).
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)
     try:
         rms, K, dist, _, _, std, _, per_view = cv2.calibrateCameraExtended(
             [v.object_points for v in views], [v.image_points for v in views],
@@ -182,6 +195,8 @@ def calibrate(views: Sequence[BoardView], width: int, height: int) -> Intrinsics
     except cv2.error as exc:
         raise UserError(f"calibrateCamera failed on {len(views)} views: "
                         f"{str(exc).strip().splitlines()[-1]}") from None
+    finally:
+        cv2.setNumThreads(threads)
     if not (np.all(np.isfinite(K)) and np.all(np.isfinite(dist)) and K[0, 0] > 0
             and K[1, 1] > 0):
         raise UserError(f"calibrateCamera gave no usable camera from {len(views)} views: "
@@ -216,33 +231,46 @@ def _progress(view: BoardView, coverage: Coverage, n_views: int) -> str:
             f"{coverage.fraction:.0%} of the image covered")
 
 
-def views_from_folder(folder: Path, detector: cv2.aruco.CharucoDetector,
-                      min_views: int) -> tuple[list[BoardView], int, int]:
-    """The board views in a folder's images, and the image size; UserError if the images
-    differ in size or fewer than `min_views` show the board."""
-    files = image_files(folder)
+def views_from_images(images: Sequence[tuple[str, np.ndarray]],
+                      detector: cv2.aruco.CharucoDetector, min_views: int,
+                      source: str) -> list[BoardView]:
+    """The board views in named images of one size, with a line of progress each; UserError
+    naming `source` (the flag they came from) if fewer than `min_views` show the board."""
     views: list[BoardView] = []
-    size = None
     coverage = None
-    for path in files:
-        image = _read_image(path)
-        h, w = image.shape[:2]
-        if size is None:
-            size, coverage = (w, h), Coverage(w, h)
-        elif (w, h) != size:
-            raise UserError(f"--images: {path} is {w}x{h}, {files[0].name} {size[0]}x{size[1]}: "
-                            "take every view at one image size")
-        view = detect_board(detector, image, path.name)
+    for name, image in images:
+        if coverage is None:
+            coverage = Coverage(image.shape[1], image.shape[0])
+        view = detect_board(detector, image, name)
         if view is None:
-            print(f"  {path.name}: board not found (or under {MIN_CORNERS} corners), skipped")
+            print(f"  {name}: board not found (or under {MIN_CORNERS} corners), skipped")
             continue
         views.append(view)
         coverage.add(view.image_points)
         print(_progress(view, coverage, len(views)))
     if len(views) < min_views:
-        raise UserError(f"--images {folder}: the board is seen in {len(views)} of {len(files)} "
+        raise UserError(f"{source}: the board is seen in {len(views)} of {len(images)} "
                         f"images, need at least {min_views} (--min-views)")
-    return views, size[0], size[1]
+    return views
+
+
+def views_from_folder(folder: Path, detector: cv2.aruco.CharucoDetector,
+                      min_views: int) -> tuple[list[BoardView], int, int]:
+    """The board views in a folder's images, and the image size; UserError if the images
+    differ in size or fewer than `min_views` show the board."""
+    files = image_files(folder)
+    images = []
+    for path in files:
+        image = _read_image(path)
+        h, w = image.shape[:2]
+        if images and (w, h) != (images[0][1].shape[1], images[0][1].shape[0]):
+            h0, w0 = images[0][1].shape[:2]
+            raise UserError(f"--images: {path} is {w}x{h}, {files[0].name} {w0}x{h0}: "
+                            "take every view at one image size")
+        images.append((path.name, image))
+    views = views_from_images(images, detector, min_views, f"--images {folder}")
+    h, w = images[0][1].shape[:2]
+    return views, w, h
 
 
 def _moved(view: BoardView, kept: Sequence[BoardView], min_shift_px: float) -> bool:
@@ -364,7 +392,8 @@ def _live_tag_poses(camera, K, dist, tag_id: int, tag_size: float, frames: int,
 # --------------------------------------------------------------------------- output
 
 def _yaml_text(cal: CameraCalibration, header: str) -> str:
-    return (f"# vlr camera calibration (format: vlr/camera.py)\n# {header}\n"
+    return ("# vlr camera calibration (format: vlr/camera.py)\n"
+            + "".join(f"# {line}\n" for line in header.splitlines())
             + yaml.safe_dump(calibration_to_dict(cal), sort_keys=False,
                              default_flow_style=None))
 
@@ -399,13 +428,22 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                               help="palm camera intrinsics from a ChArUco board and its pose "
                                    "in the palm from an AprilTag", description=__doc__,
                               formatter_class=argparse.RawDescriptionHelpFormatter)
-    src = p.add_mutually_exclusive_group()
+    # One of the three, checked in _check_args: argparse's own check prints its usage too.
+    src = p.add_argument_group("board views (one of)")
     src.add_argument("--images", type=Path, metavar="DIR", help="folder of board images")
     src.add_argument("--camera", type=int, metavar="INDEX", help="live OpenCV camera index")
+    src.add_argument("--sim", action="store_true",
+                     help="rendered views of the sim's palm camera with a known lens and "
+                          "noise; prints the calibration's errors against that truth")
+    src.add_argument("--sim-views", type=int, default=SIM_VIEWS, metavar="N",
+                     help=f"--sim: board views to render (default {SIM_VIEWS})")
+    src.add_argument("--seed", type=int, default=0,
+                     help="--sim: seeds the board poses and the sensor noise (default 0)")
     p.add_argument("--width", type=int, help="live: image width to ask the camera for [px]")
     p.add_argument("--height", type=int, help="live: image height to ask the camera for [px]")
     p.add_argument("--save-views", type=Path, metavar="DIR",
-                   help="live: save the kept board views here (to rerun with --images)")
+                   help="live or --sim: save the kept board views here (to rerun with "
+                        "--images)")
     d = BoardSpec()
     b = p.add_argument_group("board")
     b.add_argument("--squares-x", type=int, default=d.squares_x,
@@ -419,7 +457,8 @@ def register(subparsers: argparse._SubParsersAction) -> None:
     b.add_argument("--dictionary", default=d.dictionary,
                    help=f"ArUco dictionary (default {d.dictionary})")
     b.add_argument("--print-board", type=Path, metavar="FILE.png",
-                   help="write the board image to print, then stop unless --images/--camera")
+                   help="write the board image to print, then stop unless --images, "
+                        "--camera or --sim")
     b.add_argument("--dpi", type=int, default=300, help="--print-board resolution (default 300)")
     b.add_argument("--min-views", type=int, default=10,
                    help="board views needed (default 10)")
@@ -427,10 +466,12 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                    help=f"live: share of an {GRID[0]}x{GRID[1]} image grid the corners must "
                         "reach (default 0.7)")
     t = p.add_argument_group("tag (camera pose in the palm)")
-    t.add_argument("--tag-id", type=int, help="AprilTag 36h11 id")
-    t.add_argument("--tag-size", type=float, help="the tag's black square side [m]")
+    t.add_argument("--tag-id", type=int, help="AprilTag 36h11 id (--sim: default 7)")
+    t.add_argument("--tag-size", type=float,
+                   help="the tag's black square side [m] (--sim: default 0.02)")
     t.add_argument("--tag-pose", type=float, nargs=6, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
-                   help="tag frame in the palm frame: position [m], rotation vector [deg]")
+                   help="tag frame in the palm frame: position [m], rotation vector [deg] "
+                        "(--sim: default 0.003 -0.004 0.065 4 -6 25)")
     t.add_argument("--tag-image", type=Path, nargs="+", metavar="FILE",
                    help="image(s) of the tag (default with --camera: live frames)")
     t.add_argument("--tag-frames", type=int, default=10,
@@ -440,9 +481,19 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def _check_args(args: argparse.Namespace) -> np.ndarray | None:
-    """Everything that can be checked before the camera runs; T_palm_tag or None."""
-    if args.images is None and args.camera is None:
-        raise UserError("give --images DIR or --camera INDEX (or just --print-board FILE.png)")
+    """Everything that can be checked before the camera runs; T_palm_tag or None. With
+    --sim, the tag flags not given take the sim's tag."""
+    sources = [flag for flag, given in (("--images", args.images is not None),
+                                        ("--camera", args.camera is not None),
+                                        ("--sim", args.sim)) if given]
+    if not sources:
+        raise UserError("give --images DIR, --camera INDEX or --sim (or just --print-board "
+                        "FILE.png)")
+    if len(sources) > 1:
+        named = {"--images": f"--images {args.images}", "--camera": f"--camera {args.camera}",
+                 "--sim": "--sim"}
+        raise UserError(f"{' and '.join(named[f] for f in sources)}: give one source of board "
+                        "views (--images, --camera or --sim)")
     if args.out is None:
         raise UserError("give --out FILE.yaml, the calibration to write")
     if args.out.is_dir():
@@ -453,6 +504,8 @@ def _check_args(args: argparse.Namespace) -> np.ndarray | None:
         raise UserError(f"--min-views {args.min_views}: must be at least 3")
     if not 0.0 <= args.min_coverage <= 1.0:
         raise UserError(f"--min-coverage {args.min_coverage}: must be in [0, 1]")
+    if args.sim:
+        _check_sim_args(args)
     tag = {"--tag-id": args.tag_id, "--tag-size": args.tag_size, "--tag-pose": args.tag_pose}
     given = [k for k, v in tag.items() if v is not None]
     if not given:
@@ -481,6 +534,33 @@ def _check_args(args: argparse.Namespace) -> np.ndarray | None:
     return tag_pose_matrix(args.tag_pose)
 
 
+def _check_sim_args(args: argparse.Namespace) -> None:
+    """--sim's own checks; fills the tag flags not given with the sim's tag."""
+    if not args.min_views <= args.sim_views <= MAX_SIM_VIEWS:
+        raise UserError(f"--sim-views {args.sim_views}: must be from --min-views "
+                        f"({args.min_views}) to {MAX_SIM_VIEWS}")
+    if args.seed < 0:
+        raise UserError(f"--seed {args.seed}: must be 0 or more")
+    if args.width is not None or args.height is not None:
+        raise UserError(f"--width {args.width} --height {args.height}: --sim renders the sim's "
+                        "palm camera at its own size (these are for --camera)")
+    if args.tag_image:
+        raise UserError(f"--tag-image {args.tag_image[0]}: --sim renders its own tag view")
+    tag = _sim_module().SimTag()
+    args.tag_id = tag.tag_id if args.tag_id is None else args.tag_id
+    args.tag_size = tag.size if args.tag_size is None else args.tag_size
+    args.tag_pose = list(tag.pose) if args.tag_pose is None else args.tag_pose
+
+
+def _sim_module():
+    """vlr.sim.calibration_views, imported only for --sim: the hardware side runs without
+    the sim's rendering."""
+    try:
+        return importlib.import_module("vlr.sim.calibration_views")
+    except ImportError as exc:
+        raise UserError(f"--sim needs MuJoCo rendering (vlr.sim): {exc}") from None
+
+
 def run(args: argparse.Namespace) -> int:
     """The command: print the board; calibrate; measure the tag; write the YAML."""
     spec = BoardSpec(args.squares_x, args.squares_y, args.square_length, args.marker_length,
@@ -490,16 +570,24 @@ def run(args: argparse.Namespace) -> int:
         if args.dpi < 50:
             raise UserError(f"--dpi {args.dpi}: must be at least 50")
         write_board(spec, args.print_board, args.dpi)
-        if args.images is None and args.camera is None:
+        if args.images is None and args.camera is None and not args.sim:
             return 0
     T_palm_tag = _check_args(args)
     detector = cv2.aruco.CharucoDetector(board)
     camera = None
+    sim = None
     try:
         if args.images is not None:
             views, width, height = views_from_folder(args.images, detector, args.min_views)
+        elif args.sim:
+            sim = _render_sim(args, board)
+            views = views_from_images(
+                [(f"view_{k:03d}.png", image) for k, image in enumerate(sim.boards, 1)],
+                detector, args.min_views, f"--sim --sim-views {args.sim_views} --seed "
+                f"{args.seed}")
+            width, height = sim.truth.width, sim.truth.height
         else:
-            from hardware.camera import OpenCVCamera
+            from vlr.hardware.camera import OpenCVCamera
 
             # OpenCV logs each backend it tries on a bad index; CameraError says it in a line.
             level = cv2.utils.logging.getLogLevel()
@@ -516,7 +604,10 @@ def run(args: argparse.Namespace) -> int:
             T_palm_cam = load_calibration(args.out).T_palm_cam
             print(f"extrinsics kept from {args.out}")
         else:
-            if args.tag_image:
+            if sim is not None:
+                poses = [_tag_in_camera(sim.tag, fit.K, fit.dist, args.tag_id, args.tag_size,
+                                        "--sim tag view")]
+            elif args.tag_image:
                 poses = []
                 for path in args.tag_image:
                     image = _read_image(path)
@@ -535,10 +626,32 @@ def run(args: argparse.Namespace) -> int:
             camera.close()
     cal = CameraCalibration(width=width, height=height, K=fit.K, dist=fit.dist,
                             T_palm_cam=T_palm_cam)
-    write_calibration(cal, args.out, f"vlr camera-calibrate: {len(views)} board views "
-                                     f"({spec}), RMS reprojection {fit.rms_px:.3f} px")
+    header = (f"vlr camera-calibrate: {len(views)} board views ({spec}), RMS reprojection "
+              f"{fit.rms_px:.3f} px")
+    if sim is not None:
+        errors = _sim_module().compare_to_truth(
+            cal, sim.truth, np.concatenate([v.image_points for v in views]))
+        for line in _sim_report(cal, sim.truth, errors, args):
+            print(line)
+        header += "\n" + _sim_summary(errors, args)
+    write_calibration(cal, args.out, header)
     print(f"wrote {args.out}")
     return 0
+
+
+def _render_sim(args: argparse.Namespace, board: cv2.aruco.CharucoBoard):
+    """The --sim views (vlr.sim.calibration_views.CalibrationViews), saved to --save-views."""
+    cv = _sim_module()
+    print(f"rendering {args.sim_views} board views and a tag view of the sim's palm camera "
+          f"(seed {args.seed})")
+    sim = cv.render_board_views(board, args.sim_views, seed=args.seed,
+                                tag=cv.SimTag(args.tag_id, args.tag_size,
+                                              tuple(args.tag_pose)))
+    if args.save_views is not None:
+        args.save_views.mkdir(parents=True, exist_ok=True)
+        for k, image in enumerate(sim.boards, 1):
+            cv2.imwrite(str(args.save_views / f"view_{k:03d}.png"), to_gray(image))
+    return sim
 
 
 def _print_intrinsics(fit: IntrinsicsFit, views: Sequence[BoardView]) -> None:
@@ -564,3 +677,33 @@ def _print_pose(T_palm_cam: np.ndarray, poses: Sequence[np.ndarray]) -> None:
         spread = f" (tag position spread {sd:.3f} mm over {len(poses)} frames)"
     print(f"camera in the palm: position [{t[0]:.2f}, {t[1]:.2f}, {t[2]:.2f}] mm, rotation "
           f"vector [{r[0]:.2f}, {r[1]:.2f}, {r[2]:.2f}] deg{spread}")
+
+
+def _sim_report(cal: CameraCalibration, truth: CameraCalibration, errors: dict,
+                args: argparse.Namespace) -> list[str]:
+    """The --sim table: each intrinsic and coefficient, true and calibrated; how far apart
+    the true and the calibrated camera image the same rays (over a grid of the image); the
+    camera's pose error."""
+    lines = [f"against the sim's truth (--seed {args.seed}, {args.sim_views} views):",
+             f"  {'':9} {'true':>10} {'calibrated':>11} {'error':>9}"]
+    for name, (r, c) in zip(("fx", "fy", "cx", "cy"), ((0, 0), (1, 1), (0, 2), (1, 2)),
+                            strict=True):
+        lines.append(f"  {name + ' [px]':9} {truth.K[r, c]:10.3f} {cal.K[r, c]:11.3f} "
+                     f"{errors[name + '_pct']:+8.3f}%")
+    for name, t, d in zip(("k1", "k2", "p1", "p2", "k3"), errors["dist_true"],
+                          errors["dist_diff"], strict=True):
+        lines.append(f"  {name:9} {t:10.5f} {t + d:11.5f} {d:+9.5f}")
+    lines.append(f"  rays imaged apart [px]: RMS {errors['lens_rms_px']:.3f}, max "
+                 f"{errors['lens_max_seen_px']:.3f} where the board was seen, "
+                 f"{errors['lens_max_px']:.3f} anywhere")
+    lines.append(f"  camera in the palm: {errors['position_mm']:.3f} mm and "
+                 f"{errors['rotation_deg']:.3f} deg off")
+    return lines
+
+
+def _sim_summary(errors: dict, args: argparse.Namespace) -> str:
+    """The --sim errors on one line, for the YAML's header."""
+    return (f"--sim --seed {args.seed}: fx {errors['fx_pct']:+.3f}%, fy {errors['fy_pct']:+.3f}%, "
+            f"cx {errors['cx_pct']:+.3f}%, cy {errors['cy_pct']:+.3f}%; lens "
+            f"{errors['lens_max_seen_px']:.3f} px where seen, {errors['lens_max_px']:.3f} px "
+            f"anywhere; pose {errors['position_mm']:.3f} mm, {errors['rotation_deg']:.3f} deg")

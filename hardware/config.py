@@ -13,13 +13,14 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NoReturn
 
-from hardware.control_table import (
+from vlr.hardware.control_table import (
     EXTENDED_POSITION_LIMIT,
     SDK_BAUD_RATES,
     WATCHDOG_MAX,
     WATCHDOG_UNIT_MS,
     OperatingMode,
 )
+
 from vlr.spec import SpecError, load_hand, load_object, load_yaml_mapping
 
 #: `bus.port` value that runs the bus against an in-process emulator (a dry run).

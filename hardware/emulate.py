@@ -11,9 +11,9 @@ import math
 import time
 from typing import Any
 
-from hardware.config import HardwareConfig, load_config
-from hardware.control_table import TICKS_PER_REV
-from hardware.emulator import Emulator, KinematicPlant, MotorPlant
+from vlr.hardware.config import HardwareConfig, load_config
+from vlr.hardware.control_table import TICKS_PER_REV
+from vlr.hardware.emulator import Emulator, KinematicPlant, MotorPlant
 
 #: Shaft angle of every motor at power-up in the emulator [ticks] (mid-turn).
 START_SHAFT = 2048.0
@@ -38,7 +38,7 @@ def build_emulator(cfg: HardwareConfig) -> tuple[Emulator, MotorPlant]:
         shafts[cfg.spread.id] = START_SHAFT
     plant: MotorPlant
     if cfg.emulator.plant == "sim":
-        from hardware.sim_plant import SimPlant
+        from vlr.hardware.sim_plant import SimPlant
 
         plant = SimPlant(cfg, taut=taut)
     else:

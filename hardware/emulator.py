@@ -41,7 +41,7 @@ from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Protocol
 
-from hardware.control_table import (
+from vlr.hardware.control_table import (
     ALERT_BIT,
     CURRENT_UNIT_MA,
     EEPROM_END,
@@ -57,7 +57,7 @@ from hardware.control_table import (
     OperatingMode,
     Reg,
 )
-from hardware.protocol2 import (
+from vlr.hardware.protocol2 import (
     BROADCAST_ID,
     Instruction,
     Packet,

@@ -31,10 +31,9 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
-
-from hardware.config import HardwareConfig
-from hardware.control_table import TICKS_PER_REV
-from hardware.emulator import EmulatedMotor, KinematicPlant
+from vlr.hardware.config import HardwareConfig
+from vlr.hardware.control_table import TICKS_PER_REV
+from vlr.hardware.emulator import EmulatedMotor, KinematicPlant
 
 #: XM430-W350 torque constant [N m/A]: 4.1 N m stall torque at 2.3 A (12 V, datasheet).
 TORQUE_CONSTANT = 4.1 / 2.3
@@ -84,7 +83,7 @@ class SimPlant:
         ready.result(timeout=120)  # re-raises a failure to build the sim (e.g. a bad object)
 
     def _default_factory(self) -> Any:
-        from sim.backend import SimHand
+        from vlr.sim.backend import SimHand
 
         return SimHand(object=self.cfg.object, hand=self.cfg.hand, seed=0)
 
@@ -193,7 +192,7 @@ class SimPlant:
             self._phase = "grasped"
 
     def _follow(self, sim: Any, target: np.ndarray) -> None:
-        from sim.backend import COMMAND_RANGE, MAX_STEP
+        from vlr.sim.backend import COMMAND_RANGE, MAX_STEP
 
         want = np.clip(target - self._offset, COMMAND_RANGE[0], COMMAND_RANGE[1])
         delta = np.clip(want - sim.commands, -MAX_STEP, MAX_STEP)

@@ -17,9 +17,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-
-from hardware.bus import MotorBus
-from hardware.control_table import TICKS_PER_REV, Reg
+from vlr.hardware.bus import MotorBus
+from vlr.hardware.control_table import TICKS_PER_REV, Reg
 
 
 @dataclass(frozen=True)

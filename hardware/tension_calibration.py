@@ -23,8 +23,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from vlr.hardware.config import TensionConfig
 
-from hardware.config import TensionConfig
 from vlr.io import read_line
 
 #: Tendon commands about the grasp at which the currents are read [mm] (default).
@@ -178,8 +178,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
 
 
 def run(args: argparse.Namespace) -> int:
-    from hardware.backend import open_hand
-    from hardware.config import load_config
+    from vlr.hardware.backend import open_hand
+    from vlr.hardware.config import load_config
+
     from vlr.errors import UserError
     from vlr.io import write_text_atomic
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from hardware.errors import HardwareError
+from vlr.hardware.errors import HardwareError
 
 __all__ = ["HardwareWorldOptions", "BACKEND"]
 
@@ -29,7 +29,7 @@ def _open_configured(*, config: str | None = None, **ignored: Any):
     if not config:
         raise HardwareError("the hardware backend needs its config file: --config FILE "
                             "(world.options.config; hardware/README.md)")
-    from hardware.backend import open_hand
+    from vlr.hardware.backend import open_hand
 
     return open_hand(config=config)
 

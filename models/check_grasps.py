@@ -4,7 +4,7 @@ identification's defaults: 0.2-0.4 mm within 0.4 mm of the grasp command, 0.1 s 
 the palm camera must see the tag after the grasp. A spec file of a new object, finger or
 hand is checked with it before it joins a sweep.
 
-Usage: python -m models.check_grasps [--actions 50] [--seeds 0-4] HAND:OBJECT [HAND:OBJECT ...]
+Usage: python -m vlr.models.check_grasps [--actions 50] [--seeds 0-4] HAND:OBJECT [HAND:OBJECT ...]
 (HAND and OBJECT: names in models/ or spec file paths). Prints one line per pair and exits 1
 if any grasp failed, slipped or lost its tag.
 """
@@ -44,7 +44,8 @@ class HoldReport:
 def check_hold(hand: str, obj: str, seeds: list[int], actions: int = 50) -> HoldReport:
     """Grasp `obj` with `hand` and make `actions` random actions for each seed (the seed
     drives the actions as `vlr identify`'s does: `seed + 1`)."""
-    from sim.backend import GraspError, SimHand, SimOptions, SimWorldOptions
+    from vlr.sim.backend import GraspError, SimHand, SimOptions, SimWorldOptions
+
     from vlr.perception.pipeline import observe
 
     loop = LoopConfig()
@@ -94,7 +95,7 @@ def _seeds(text: str) -> list[int]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m models.check_grasps", description=__doc__,
+    ap = argparse.ArgumentParser(prog="python -m vlr.models.check_grasps", description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("pairs", nargs="+", metavar="HAND:OBJECT")
     ap.add_argument("--actions", type=int, default=50)

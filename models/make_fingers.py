@@ -9,15 +9,14 @@ The novel fingers differ clearly in shape (the paper's NF1-NF3 have proximal lin
 50 mm): NF1 a short straight finger, NF2 a finger with a hooked distal tip, NF3 a wide
 paddle-shaped distal link.
 
-Usage: python -m models.make_fingers
+Usage: python -m vlr.models.make_fingers
 """
 
 from __future__ import annotations
 
 import numpy as np
 import trimesh
-
-from models import ROOT
+from vlr.models import ROOT
 
 MESH_DIR = ROOT / "assets" / "fingers"
 

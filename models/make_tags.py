@@ -5,7 +5,7 @@ upscaled with nearest-neighbour so MuJoCo's texture filtering keeps the cell edg
 The black square is 8/10 of the texture's side: an object's `tag_size` is that black square
 (what pose estimation needs), and its texture side is tag_size * 10 / 8.
 
-Usage: python -m models.make_tags [IDS...]   (default: the ids of every object spec)
+Usage: python -m vlr.models.make_tags [IDS...]   (default: the ids of every object spec)
 """
 
 from __future__ import annotations
@@ -15,8 +15,7 @@ from pathlib import Path
 
 import cv2
 import numpy as np
-
-from models import ROOT
+from vlr.models import ROOT
 
 TAG_DIR = ROOT / "assets" / "tags"
 CELLS_BLACK = 8     # marker with its black border, in cells

@@ -11,13 +11,17 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, replace
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+# Mesa's llvmpipe renders on threads of its own, which a fork() does not copy: a process
+# forked after a frame was rendered (gymnasium's AsyncVectorEnv, Stable-Baselines3's
+# SubprocVecEnv) waits for them for ever. On the caller's thread it is fork-safe.
+os.environ.setdefault("LP_NUM_THREADS", "0")
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
+from vlr.sim.model import build_scene, compile_scene  # noqa: E402
+from vlr.sim.truth import GroundTruth, read_truth  # noqa: E402
 
-from sim.model import build_scene, compile_scene  # noqa: E402
-from sim.truth import GroundTruth, read_truth  # noqa: E402
 from vlr.hand import ApplyReport, CommandError, Frame, GraspError, check_delta  # noqa: E402
 from vlr.spec import (  # noqa: E402
     FingerSpec,
@@ -174,7 +178,7 @@ class SimHand:
     @property
     def calibration(self):
         if self._calibration is None:
-            from sim.camera import calibration_of
+            from vlr.sim.camera import calibration_of
 
             cal = calibration_of(self.model, self.data, self.options.width,
                                  self.options.height)
@@ -196,7 +200,7 @@ class SimHand:
         topped = self._top_up_tensions(target)
         settled = settled if topped is None else topped
         held, message = self._grasp_status()
-        from sim.truth import contact_summary
+        from vlr.sim.truth import contact_summary
 
         on_links = [s for s, pts in contact_summary(self).points.items()
                     if any(r == "proximal_link" for _, _, r in pts)]
@@ -262,7 +266,7 @@ class SimHand:
 
     def grab_frame(self) -> Frame | None:
         """Render the palm camera (with the configured degradations), or None if dropped."""
-        from sim.camera import render_palm_camera
+        from vlr.sim.camera import render_palm_camera
 
         image = render_palm_camera(self)
         if image is None:
@@ -368,7 +372,7 @@ class SimHand:
         return False
 
     def _grasp_status(self) -> tuple[bool, str]:
-        from sim.truth import contact_summary
+        from vlr.sim.truth import contact_summary
 
         summary = contact_summary(self)
         problems = []

@@ -16,7 +16,7 @@ import numpy as np
 from vlr.camera import CameraCalibration, calibration_from_mujoco_camera
 
 if TYPE_CHECKING:
-    from sim.backend import SimHand
+    from vlr.sim.backend import SimHand
 
 CAMERA_NAME = "palm_camera"
 
@@ -78,7 +78,7 @@ def render_palm_camera(hand: SimHand) -> np.ndarray | None:
     image = r.render()
     if opts.effects is None:
         return image
-    from sim.camera_effects import apply_effects
+    from vlr.sim.camera_effects import apply_effects
 
     return apply_effects(image, opts.effects, hand.rng, hand.calibration)
 

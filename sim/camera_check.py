@@ -52,7 +52,7 @@ class CameraReport:
 def camera_trial(obj: str, *, actions: int = 50, seed: int = 0, width: int = 640,
                  height: int = 480, effects=None, hand: str = "modelo") -> CameraReport:
     """Grasp `obj`, explore `actions` times, and score every rendered frame's detection."""
-    from sim.backend import SimHand, SimOptions
+    from vlr.sim.backend import SimHand, SimOptions
 
     opts = SimOptions(width=width, height=height, effects=effects)
     pos, ori, rt, dtimes = [], [], [], []
@@ -142,7 +142,7 @@ def run(args: argparse.Namespace) -> int:
         load_object(obj)
     effects = None
     if args.noise:
-        from sim.camera_effects import CameraEffects
+        from vlr.sim.camera_effects import CameraEffects
 
         effects = CameraEffects(noise_std=args.noise)
     reports = []

@@ -39,9 +39,9 @@ import time
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from vlr.sim.gap_fit import profile_unknown
+from vlr.sim.pads import SLIDE_FRICTION
 
-from sim.gap_fit import profile_unknown
-from sim.pads import SLIDE_FRICTION
 from vlr.errors import UserError
 from vlr.explore import ActionStream
 from vlr.identify import LoopConfig
@@ -139,7 +139,7 @@ class GapSettings:
             object.__setattr__(self, "motion",
                                load_settings({"world.backend": "sim"}).filter.motion)
         if self.ramp_time is None:
-            from sim.backend import SimWorldOptions
+            from vlr.sim.backend import SimWorldOptions
 
             object.__setattr__(self, "ramp_time", SimWorldOptions.ramp_time)
         if (isinstance(self.ramp_time, bool) or not isinstance(self.ramp_time, int | float)
@@ -173,8 +173,8 @@ def record_actions(settings: GapSettings) -> Recording:
     """Grasp in the simulator and make the random actions, recording the truth after each.
 
     Stops early if the fingertip grasp is lost (`dropped_at`: the action that lost it)."""
-    from sim.backend import SimHand, SimOptions
-    from sim.truth import pad_forces
+    from vlr.sim.backend import SimHand, SimOptions
+    from vlr.sim.truth import pad_forces
 
     options = SimOptions(ramp_time=settings.ramp_time)
     with SimHand(object=settings.object, hand=settings.hand, seed=settings.seed,

@@ -12,7 +12,8 @@ import io
 import math
 from dataclasses import replace
 
-from sim.gap import OBJECTS, STARTS, GapSettings, filter_rung, format_report, gap_report
+from vlr.sim.gap import OBJECTS, STARTS, GapSettings, filter_rung, format_report, gap_report
+
 from vlr.errors import UserError
 
 __all__ = ["register", "table_rows", "CSV_COLUMNS"]
@@ -91,7 +92,8 @@ def table_rows(rep: dict) -> list[dict]:
 
 def _settings(args: argparse.Namespace) -> GapSettings:
     """The model and ramp of the sim's identification, with the --set overrides."""
-    from sim.backend import SimWorldOptions
+    from vlr.sim.backend import SimWorldOptions
+
     from vlr import smoke
     from vlr.settings import load_settings, parse_assignment
 

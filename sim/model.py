@@ -4,8 +4,10 @@ A finger is a module built from a `FingerSpec` and attached to a palm slot (one 
 copy-pasted fingers); the object carries its AprilTag on a thin card under its bottom face.
 Every tuned number has its source in models/README.md.
 
-Naming grammar (Menagerie style): `<slot>/proximal`, `<slot>/distal` (bodies and joints),
-`<slot>/pad` (fingertip pad geom), `<slot>/tendon`, `<slot>/tendon_act`; `object`, `object/tag`.
+Naming grammar (dm_control.mjcf's scopes): `<slot>/proximal`, `<slot>/distal` (bodies and
+joints), `<slot>/pad` (fingertip pad geom), `<slot>/tendon`, `<slot>_tendon_act`;
+`object/object`, `object/tag`. The MJCF files of models/mjcf/ write them without `/`
+(`thumb_proximal`; models/make_mjcf.py `clean_name`).
 """
 
 from __future__ import annotations
@@ -18,9 +20,9 @@ from pathlib import Path
 import mujoco
 import numpy as np
 from dm_control import mjcf
+from vlr.models.make_tags import TEXTURE_PER_BLACK, tag_path, write_tag
+from vlr.sim.pads import ROLL_FRICTION, SLIDE_FRICTION, TORSION_FRICTION
 
-from models.make_tags import TEXTURE_PER_BLACK, tag_path, write_tag
-from sim.pads import ROLL_FRICTION, SLIDE_FRICTION, TORSION_FRICTION
 from vlr.spec import FingerSpec, HandSpec, ObjectSpec, SpecError
 
 # Contact model for stable fingertip grasps (docs/METHOD.md 8.2, models/README.md "Contacts").

@@ -27,14 +27,17 @@ import os
 from collections.abc import Sequence
 
 os.environ.setdefault("MUJOCO_GL", "egl")
+# Mesa's llvmpipe renders on threads of its own, which a fork() does not copy: a process
+# forked after a frame was rendered (gymnasium's AsyncVectorEnv, Stable-Baselines3's
+# SubprocVecEnv) waits for them for ever. On the caller's thread it is fork-safe.
+os.environ.setdefault("LP_NUM_THREADS", "0")
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
 
 import mujoco  # noqa: E402
 import numpy as np  # noqa: E402
 from dm_control import mjcf  # noqa: E402
-
-from sim.backend import SimHand, SimOptions  # noqa: E402
-from sim.model import (  # noqa: E402
+from vlr.sim.backend import SimHand, SimOptions  # noqa: E402
+from vlr.sim.model import (  # noqa: E402
     SOLREF,
     TAG_CARD_THICKNESS,
     build_hand,
@@ -42,6 +45,7 @@ from sim.model import (  # noqa: E402
     build_scene,
     cup_dimensions,
 )
+
 from vlr.hand import ApplyReport, GraspError  # noqa: E402
 from vlr.spec import HandSpec, ObjectSpec, load_object  # noqa: E402
 

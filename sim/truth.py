@@ -13,7 +13,7 @@ import mujoco
 import numpy as np
 
 if TYPE_CHECKING:
-    from sim.backend import SimHand
+    from vlr.sim.backend import SimHand
 
 
 @dataclass(frozen=True)

@@ -18,9 +18,14 @@ Observation: a Dict of `observation` (the POM's camera pose [x, y, z, rotation v
 the tendon commands relative to the task's centre [m]), `achieved_goal` (what the task
 steers, from the camera: the POM's position, its rotation vector, or both, `goal_rows`) and
 `desired_goal` (the current target, alike); with `include_image`, the palm camera frame.
-The reward is `compute_reward(achieved_goal, desired_goal, info)`: minus the distance to the
-target (mm, degrees, or Eq. 12's weighted pose error), and `info["is_success"]` says whether
-the camera puts the POM within the task's tolerance of it.
+`info["is_success"]` is 1.0 when the camera puts the POM within the task's tolerance of the
+target, else 0.0. The goal API is Gymnasium-Robotics' `GoalEnv`'s, and `step` returns what
+its three functions give on the observation and info it returns: `compute_reward` (vectorised,
+as HER relabels with it): with `reward_type="sparse"` (Fetch's default) -1.0 until success,
+then 0.0; with "dense" minus the distance to the target (mm, degrees, or Eq. 12's weighted
+pose error). `compute_terminated`: the task is done (`info["task_done"]`) or the grasp is lost.
+`compute_truncated`: the identification in reset failed (or a smoke test's few moves are
+made, `vlr.smoke`). gymnasium's `TimeLimit` adds the step limit, as for Fetch.
 
 What a policy sees: tendon commands and camera-derived POM poses, and, through
 `env.unwrapped`, the identified filter (`pf`), the last camera pose and the record of every
@@ -42,6 +47,7 @@ from typing import Any, ClassVar
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from vlr.tasks import REWARD_TYPES
 
 from vlr import smoke
 from vlr.controller import ControllerConfig, rotation_log
@@ -104,6 +110,8 @@ class HandTaskEnv(gym.Env):
             set filter.particles and the loop's action count.
         expose_truth: put the simulator's ground truth in `info["truth"]` (for scoring;
             a compared policy must not read it).
+        reward_type: "sparse" (-1.0 until success, then 0.0) or "dense" (minus the
+            distance to the target), as Gymnasium-Robotics' `reward_type`.
     """
 
     metadata: ClassVar[dict[str, Any]] = {"render_modes": ["rgb_array"], "render_fps": 4}
@@ -120,7 +128,7 @@ class HandTaskEnv(gym.Env):
                  include_image: bool = False, image_size: tuple[int, int] = (120, 160),
                  hardware_config: str | None = None,
                  settings: Mapping[str, Any] | None = None,
-                 expose_truth: bool = False) -> None:
+                 expose_truth: bool = False, reward_type: str = "sparse") -> None:
         if backend not in ("sim", "hardware"):
             raise ValueError(f"backend {backend!r}: use 'sim' or 'hardware'")
         if backend == "hardware" and not hardware_config:
@@ -132,6 +140,9 @@ class HandTaskEnv(gym.Env):
             raise ValueError("particles must be >= 10 and identify_iterations >= 0")
         if not max_step > 0:
             raise ValueError(f"max_step {max_step!r} must be > 0 [m]")
+        if reward_type not in REWARD_TYPES:
+            raise ValueError(f"reward_type {reward_type!r}: use one of {REWARD_TYPES}")
+        self.reward_type = reward_type
         self.backend = backend
         self.render_mode = render_mode
         self.identify = bool(identify)
@@ -171,6 +182,7 @@ class HandTaskEnv(gym.Env):
         self.grasp_lost = False
         self.grasp_message = ""
         self.identification_failed = ""   # why the last identification failed, if it did
+        self.task_done = False
         self._last_action_m = np.zeros(TENDONS)   # the tendon change of the last step [m]
         self.episode = 0
         self.identified = 0          # identifications so far (several per episode: cups)
@@ -239,6 +251,7 @@ class HandTaskEnv(gym.Env):
             self.hand = hand
         self.episode += 1
         self.identification_failed = ""
+        self.task_done = False
         self.observation = None
         self._last_action_m = np.zeros(TENDONS)
         try:
@@ -347,32 +360,38 @@ class HandTaskEnv(gym.Env):
                                 "squeeze?)")
 
     def step(self, action):
-        if self.identification_failed:   # reset found no VLR to start from
-            return self._get_obs(), 0.0, False, True, self._info()
         a = np.asarray(action, dtype=float)
         if a.shape != (TENDONS,):
             raise ValueError(f"action {action!r}: shape {a.shape}, expected ({TENDONS},)")
         if not np.all(np.isfinite(a)):
             raise ValueError(f"action {a.tolist()} is not finite")
-        u = self.commands
-        release, pull = self.command_band
-        target = np.clip(u + np.clip(a, -1.0, 1.0) * self.max_step, self.center - release,
-                         self.center + pull)
-        self._apply(target - u)
-        self._last_action_m = self.commands - u
-        terminated = bool(self._task_step() or self.grasp_lost)
+        if not self.identification_failed:   # else reset found no VLR: the episode truncates
+            u = self.commands
+            release, pull = self.command_band
+            target = np.clip(u + np.clip(a, -1.0, 1.0) * self.max_step,
+                             self.center - release, self.center + pull)
+            self._apply(target - u)
+            self._last_action_m = self.commands - u
+            self.task_done = bool(self._task_step())
         obs, info = self._get_obs(), self._info()
-        reward = float(self.compute_reward(obs["achieved_goal"], obs["desired_goal"], info))
-        # VLR_SMOKE (vlr/smoke.py): a smoke test's episode, a few moves of the default one.
-        truncated = smoke.active() and len(self.moves) >= smoke.TASK_MOVES
-        return obs, reward, terminated, truncated, info
+        achieved, desired = obs["achieved_goal"], obs["desired_goal"]
+        return (obs, float(self.compute_reward(achieved, desired, info)),
+                self.compute_terminated(achieved, desired, info),
+                self.compute_truncated(achieved, desired, info), info)
 
     def compute_reward(self, achieved_goal: np.ndarray, desired_goal: np.ndarray,
                        info: Any = None) -> np.ndarray | float:
-        """Minus the distance from `achieved_goal` to `desired_goal` (..., n): position in
-        mm, rotation in degrees, a pose as Eq. 12's weighted error (mm and `alpha` x degrees,
-        the task's `controller_config`). Vectorised over leading dimensions, as
-        Gymnasium-Robotics' goal environments (HER relabels with it)."""
+        """The reward of goals (..., n), vectorised over leading dimensions as
+        Gymnasium-Robotics' goal environments' (HER relabels with it). Sparse: -1.0, or 0.0
+        where the goals are within the task's tolerance (`_is_success`); dense: minus their
+        distance, position in mm, rotation in degrees, a pose as Eq. 12's weighted error (mm
+        and `alpha` x degrees, the task's `controller_config`). `info` (None, a dict, or one
+        per goal) matters only where the identification failed (`identification_failed`):
+        no pose was seen, so no success either."""
+        if self.reward_type == "sparse":
+            success = self._is_success(achieved_goal, desired_goal)
+            failed = _info_flags(info, "identification_failed")
+            return np.where(failed, 0.0, success) - 1.0
         pos_mm, rot_deg = _goal_distances(self.goal_rows, achieved_goal, desired_goal)
         if self.goal_rows == "position":
             d = pos_mm
@@ -380,7 +399,33 @@ class HandTaskEnv(gym.Env):
             d = rot_deg
         else:
             d = np.hypot(pos_mm, self.controller_config.alpha * rot_deg)
-        return -d
+        return 0.0 - d   # (not -d: no -0.0 at the target)
+
+    def compute_terminated(self, achieved_goal: np.ndarray, desired_goal: np.ndarray,
+                           info: Any) -> bool | np.ndarray:
+        """Whether the episode ends in the task: it is done (`info["task_done"]`: every
+        target visited) or the grasp is lost (`info["grasp_lost"]`). The task's progress, not
+        the goals, decides, as Gymnasium-Robotics allows through `info`; a bool for one info
+        dict, an array for a batch of them."""
+        done = _info_flags(info, "task_done") | _info_flags(info, "grasp_lost")
+        return bool(done) if done.ndim == 0 else done
+
+    def compute_truncated(self, achieved_goal: np.ndarray, desired_goal: np.ndarray,
+                          info: Any) -> bool | np.ndarray:
+        """Whether the episode is cut short outside the task: the identification in reset
+        failed (`info["identification_failed"]`), or, under `VLR_SMOKE` (`vlr.smoke`), a smoke
+        test's few moves are recorded (`info["moves"]`). The step limit is gymnasium's
+        `TimeLimit`'s, as for Fetch. A bool for one info dict, an array for a batch."""
+        cut = _info_flags(info, "identification_failed")
+        if smoke.active():
+            cut = cut | (_info_values(info, "moves", int) >= smoke.TASK_MOVES)
+        return bool(cut) if cut.ndim == 0 else cut
+
+    def _is_success(self, achieved_goal: np.ndarray, desired_goal: np.ndarray) -> np.ndarray:
+        """1.0 where goals (..., n) are within the task's tolerance (`_goal_reached`), else
+        0.0; vectorised, as Fetch's."""
+        pos_mm, rot_deg = _goal_distances(self.goal_rows, achieved_goal, desired_goal)
+        return np.asarray(self._goal_reached(pos_mm, rot_deg), dtype=float)
 
     def _goal_reached(self, pos_mm: np.ndarray, rot_deg: np.ndarray) -> np.ndarray | bool:
         """Whether distances (position mm, rotation degrees) are within the task's
@@ -413,7 +458,7 @@ class HandTaskEnv(gym.Env):
         if self.render_mode != "rgb_array" or self.hand is None:
             return None
         if self.backend == "sim":
-            from sim.camera import render_scene
+            from vlr.sim.camera import render_scene
 
             return render_scene(self.hand)
         frame = self.hand.grab_frame()
@@ -457,16 +502,15 @@ class HandTaskEnv(gym.Env):
                                 "action_m": self._last_action_m.copy(),
                                 "tag_seen": seen, "filter_lost": self.filter_lost,
                                 "grasp_lost": self.grasp_lost,
-                                "identification_failed": self.identification_failed}
+                                "identification_failed": self.identification_failed,
+                                "task_done": self.task_done, "moves": len(self.moves)}
         if self.observation is None or self.identification_failed:
-            info["is_success"] = False
+            info["is_success"] = 0.0
             return info
         info.update(self._task_info())
         pose = pose_vector(self.observation.position, self.observation.rotation)
         cols = GOAL_COLUMNS[self.goal_rows]
-        pos_mm, rot_deg = _goal_distances(self.goal_rows, pose[cols],
-                                          self._target_vector()[cols])
-        info["is_success"] = bool(self._goal_reached(pos_mm, rot_deg))
+        info["is_success"] = float(self._is_success(pose[cols], self._target_vector()[cols]))
         if self.expose_truth and self.backend == "sim" and self.has_truth:
             t = self.hand.truth()
             info["truth"] = {"pom_position": t.pom_position.copy(),
@@ -476,7 +520,7 @@ class HandTaskEnv(gym.Env):
     def baseline(self, **changes: Any):
         """The VLR baseline policy for this env (`tasks.baseline.VLRBaseline`), with optional
         changes to the task's controller settings (e.g. method="transpose")."""
-        from tasks.baseline import VLRBaseline
+        from vlr.tasks.baseline import VLRBaseline
 
         return VLRBaseline(self, **changes)
 
@@ -527,6 +571,26 @@ def _goal_distances(rows: str, achieved: np.ndarray,
     ra, rd = np.array(a[..., -3:]).reshape(-1, 3), np.array(d[..., -3:]).reshape(-1, 3)
     rel = Rotation.from_rotvec(rd) * Rotation.from_rotvec(ra).inv()
     return pos, np.degrees(rel.magnitude()).reshape(lead)
+
+
+def _info_values(info: Any, key: str, kind: type) -> np.ndarray:
+    """`kind(info[key])` (`kind()` where the key is missing) as an array: 0-d for one info dict
+    or None, shaped like a batch of them (a list or an object array of dicts, as HER passes,
+    or a vector env's info, a dict of arrays)."""
+    if info is None or isinstance(info, Mapping):
+        value = (info or {}).get(key, kind())
+        if isinstance(value, np.ndarray):   # a vector env's: one value per env
+            return value.astype(kind)
+        return np.asarray(kind(value))
+    batch = np.asarray(info, dtype=object)
+    values = [kind(i.get(key, kind())) if isinstance(i, Mapping) else kind()
+              for i in batch.flat]
+    return np.asarray(values, dtype=kind).reshape(batch.shape)
+
+
+def _info_flags(info: Any, key: str) -> np.ndarray:
+    """`info[key]`'s truth (`_info_values`): a message or a flag, False where missing."""
+    return _info_values(info, key, bool)
 
 
 def _band(command_band) -> tuple:

@@ -1,6 +1,6 @@
 """The VLR baseline policy: the Jacobian controller (Eq. 10-12) on the env's identified VLR.
 
-    env = gymnasium.make("vlr/Handwriting-v1")
+    env = gymnasium.make("vlr/Handwriting-v2")
     obs, info = env.reset(seed=0)
     policy = VLRBaseline(env)
     while True:

@@ -1,10 +1,11 @@
 """What the task environments cost: median seconds of a `reset` and of a `step` per registered
-id, at its defaults and with `identify=False`, beside `vlr bench`'s yardstick measured in the
-same run (docs/TASKS.md, "Cost").
+id (by default each task's sparse id: its dense twin differs in the reward only), at its
+defaults and with `identify=False`, beside `vlr bench`'s yardstick measured in the same run
+(docs/TASKS.md, "Cost").
 
-    python -m tasks.cost                       # every id, seeds 0-2, 3 steps per reset
-    python -m tasks.cost --ids vlr/Handwriting-v1 --seeds 5
-    python -m tasks.cost --particles 5000 --identify-iterations 15   # another identification
+    python -m vlr.tasks.cost                       # every task, seeds 0-2, 3 steps per reset
+    python -m vlr.tasks.cost --ids vlr/Handwriting-v2 --seeds 5
+    python -m vlr.tasks.cost --particles 5000 --identify-iterations 15   # another identification
 """
 
 from __future__ import annotations
@@ -37,12 +38,13 @@ def env_cost(env_id: str, seeds: int, steps: int, **make_kwargs) -> tuple[float,
 
 
 def main(argv: list[str] | None = None) -> int:
-    import tasks
+    from vlr import tasks
     from vlr.commands.bench import yardstick
 
-    p = argparse.ArgumentParser(prog="python -m tasks.cost", description=__doc__.split("\n\n")[0])
-    p.add_argument("--ids", nargs="+", default=list(tasks.ENVIRONMENTS),
-                   help="registered ids (default: every one)")
+    p = argparse.ArgumentParser(prog="python -m vlr.tasks.cost",
+                                description=__doc__.split("\n\n")[0])
+    p.add_argument("--ids", nargs="+", default=list(tasks.DENSE),
+                   help="registered ids (default: each task's sparse id)")
     p.add_argument("--seeds", type=int, default=3, help="resets per id (seeds 0..N-1)")
     p.add_argument("--steps", type=int, default=3, help="steps timed after each reset")
     p.add_argument("--particles", type=int, help="the identification's (default: the task's)")
@@ -69,7 +71,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"{'id':24s} {'identify':>8s} {'reset s':>8s} {'step s':>8s}")
     for env_id in args.ids:
         for identify in (True, False):
-            if not identify and env_id == tasks.CUP_STACKING:
+            if not identify and env_id in (tasks.CUP_STACKING, tasks.CUP_STACKING_DENSE):
                 continue   # cup stacking needs the identification (tasks/cups.py)
             reset, step = env_cost(env_id, args.seeds, args.steps, identify=identify, **make)
             print(f"{env_id:24s} {str(identify):>8s} {reset:8.2f} {step:8.3f}", flush=True)

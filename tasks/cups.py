@@ -50,9 +50,9 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from vlr.tasks.base import HandTaskEnv, save_figure
+from vlr.tasks.maze import axis_angle
 
-from tasks.base import HandTaskEnv, save_figure
-from tasks.maze import axis_angle
 from vlr.controller import ROWS, ControllerConfig, pose_error, reachable_motion
 from vlr.errors import UserError
 from vlr.hand import GraspError
@@ -84,7 +84,7 @@ def _quat(rot: np.ndarray) -> np.ndarray:
 
 
 class CupStackingEnv(HandTaskEnv):
-    """`vlr/CupStacking-v1` (module docstring).
+    """`vlr/CupStacking-v2` (sparse), `vlr/CupStackingDense-v2` (module docstring).
 
     Args (besides `HandTaskEnv`'s):
         n_cups: cups to stack on the target (1-4; the paper: 4).
@@ -161,7 +161,7 @@ class CupStackingEnv(HandTaskEnv):
         self.layout: dict[str, dict[str, float]] = {}
 
     def _open_hand(self):
-        from sim.scenes import CupsHand
+        from vlr.sim.scenes import CupsHand
 
         return CupsHand(CUPS, seed=0)
 
@@ -274,7 +274,7 @@ class CupStackingEnv(HandTaskEnv):
         One move's bounds, not the band's whole reach: the band's reach plans shifts twice
         as long in directions 2-3 mm off what the correction then does, and was measured
         worse (docs/TASKS.md)."""
-        from tasks.baseline import fitted_jacobian
+        from vlr.tasks.baseline import fitted_jacobian
 
         jac = fitted_jacobian(self, self.controller_config)
         # Level by the rotation rows the controller keeps (no yaw when it drops yaw).
@@ -434,8 +434,7 @@ class CupStackingEnv(HandTaskEnv):
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
-
-        from sim.camera import render_scene
+        from vlr.sim.camera import render_scene
 
         img = render_scene(self.hand, camera="stack_camera")
         m = self.metrics()
@@ -467,7 +466,7 @@ class CupStackingEnv(HandTaskEnv):
 
     def render(self):
         if self.render_mode == "rgb_array" and self.hand is not None:
-            from sim.camera import render_scene
+            from vlr.sim.camera import render_scene
 
             return render_scene(self.hand, camera="cups_camera")
         return super().render()
@@ -490,6 +489,6 @@ def nested(hand, lower: str, upper: str) -> bool:
 
 
 def _dims(spec) -> dict[str, float]:
-    from sim.model import cup_dimensions
+    from vlr.sim.model import cup_dimensions
 
     return cup_dimensions(spec)

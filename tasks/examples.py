@@ -16,9 +16,9 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from vlr.tasks.base import GOAL_COLUMNS
+from vlr.tasks.baseline import move_pairs
 
-from tasks.base import GOAL_COLUMNS
-from tasks.baseline import move_pairs
 from vlr.controller import ROWS
 
 __all__ = ["hold", "camera_only"]

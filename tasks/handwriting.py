@@ -21,9 +21,9 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+from vlr.tasks.base import HandTaskEnv, save_figure
+from vlr.tasks.letters import letter_waypoints
 
-from tasks.base import HandTaskEnv, save_figure
-from tasks.letters import letter_waypoints
 from vlr.controller import ControllerConfig
 
 __all__ = ["Waypoint", "HandwritingEnv"]
@@ -39,7 +39,8 @@ class Waypoint:
 
 
 class HandwritingEnv(HandTaskEnv):
-    """`vlr/Handwriting-v1`: the POM writes `word` (default "SCIENCE") under the apple.
+    """`vlr/Handwriting-v2` (sparse), `vlr/HandwritingDense-v2`: the POM writes `word`
+    (default "SCIENCE") under the apple.
 
     Args (besides `HandTaskEnv`'s):
         word: letters to write (from `tasks.letters.STROKES`).

@@ -24,8 +24,8 @@ import time
 from typing import Any
 
 import numpy as np
+from vlr.tasks.base import HandTaskEnv, save_figure
 
-from tasks.base import HandTaskEnv, save_figure
 from vlr.controller import ControllerConfig, rotation_log
 from vlr.errors import UserError
 from vlr.motion import rotvec_to_matrix
@@ -55,7 +55,7 @@ def axis_angle(axis: np.ndarray, angle: float) -> np.ndarray:
 
 
 class MarbleMazeEnv(HandTaskEnv):
-    """`vlr/MarbleMaze-v1` (module docstring).
+    """`vlr/MarbleMaze-v2` (sparse), `vlr/MarbleMazeDense-v2` (module docstring).
 
     Args (besides `HandTaskEnv`'s):
         tilt_deg: the plate's tilt for each run [deg].
@@ -96,7 +96,7 @@ class MarbleMazeEnv(HandTaskEnv):
 
     def _open_hand(self):
         if self.backend == "sim":
-            from sim.scenes import MazeHand
+            from vlr.sim.scenes import MazeHand
 
             return MazeHand(WALLS, object=self.object_name, seed=0)
         hand = super()._open_hand()
@@ -110,7 +110,7 @@ class MarbleMazeEnv(HandTaskEnv):
 
     # ------------------------------------------------------------------ task hooks
     def _start_task(self) -> None:
-        from sim.scenes import plate_mount
+        from vlr.sim.scenes import plate_mount
 
         _, self.mount = plate_mount(self.hand.object_spec)       # plate in O (a design fact)
         plate = np.asarray(self.observation.rotation) @ self.mount
@@ -262,7 +262,7 @@ class MarbleMazeEnv(HandTaskEnv):
 
     def render(self):
         if self.render_mode == "rgb_array" and self.backend == "sim" and self.hand is not None:
-            from sim.camera import render_scene
+            from vlr.sim.camera import render_scene
 
             return render_scene(self.hand, camera="maze_camera")
         return super().render()

@@ -1,4 +1,4 @@
-"""Summarise `vlr task` runs: `python -m tasks.report DIR [DIR ...]` reads each DIR/result.json
+"""Summarise `vlr task` runs: `python -m vlr.tasks.report DIR [DIR ...]` reads each DIR/result.json
 and prints, per task, the mean and SD over runs of each headline error and the successes,
 as the Markdown rows of docs/TASKS.md (`vlr.task_report`, which `vlr task --seeds` also
 writes as OUT/summary.md)."""

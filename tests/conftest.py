@@ -4,6 +4,9 @@ import pytest
 
 os.environ.setdefault("MUJOCO_GL", "egl")
 os.environ.setdefault("PYOPENGL_PLATFORM", "egl")
+# As `vlr` and `sim` set it, before any test renders: a process forked after llvmpipe's
+# threads started hangs (tests/test_task_conventions.py forks workers).
+os.environ.setdefault("LP_NUM_THREADS", "0")
 
 # A tiny sweep for tests/test_sweep*.py: 2 cases x 2 seeds of the synthetic world, seconds.
 TINY_SWEEP = """\

@@ -14,16 +14,16 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 import yaml
+from vlr.hardware.camera import FakeCamera
+from vlr.hardware.config import HardwareConfig, load_config
+from vlr.hardware.emulate import build_emulator
+from vlr.hardware.emulator import Emulator
 
-from hardware.camera import FakeCamera
-from hardware.config import HardwareConfig, load_config
-from hardware.emulate import build_emulator
-from hardware.emulator import Emulator
 from vlr.camera import CameraCalibration
 from vlr.spec import ObjectSpec, load_hand, load_object
 
 if TYPE_CHECKING:  # the hand needs the `hardware` extra; the configs do not
-    from hardware.backend import HardwareHand
+    from vlr.hardware.backend import HardwareHand
 
 ROOT = Path(__file__).resolve().parents[1]
 EXAMPLE_CAMERA = ROOT / "hardware" / "example_camera.yaml"
@@ -76,7 +76,7 @@ def hand_on_emulator(cfg: HardwareConfig, camera: FakeCamera | None = None
     """A started emulator for `cfg` and a hand on it (with `camera`, default a blank one);
     the emulator outlives the hand so that tests can inspect the torque registers after the
     hand closed."""
-    from hardware.backend import HardwareHand
+    from vlr.hardware.backend import HardwareHand
 
     emulator, _ = build_emulator(cfg)
     emulator.start()
@@ -110,7 +110,7 @@ def sim_config_dict(**extra: Any) -> dict[str, Any]:
 def hand_on_sim_plant(cfg: HardwareConfig) -> Iterator[tuple[HardwareHand, Emulator, Any]]:
     """A hand on emulated motors that drive the simulated hand: (hand, emulator, plant). The
     hand is open inside the block; the emulator is stopped and the plant closed after it."""
-    from hardware.backend import HardwareHand
+    from vlr.hardware.backend import HardwareHand
 
     emulator, plant = build_emulator(cfg)
     emulator.start()

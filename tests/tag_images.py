@@ -18,8 +18,8 @@ import functools
 import cv2
 import numpy as np
 from scipy.spatial.transform import Rotation
+from vlr.models.make_tags import TEXTURE_PER_BLACK, tag_image
 
-from models.make_tags import TEXTURE_PER_BLACK, tag_image
 from vlr.camera import CameraCalibration, pose_to_matrix
 
 SUPERSAMPLE = 4

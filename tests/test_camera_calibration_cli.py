@@ -1,37 +1,28 @@
 """`vlr camera-calibrate` on MuJoCo renders of the printed board and a tag, seen by a palm
 camera with the model's field of view and resolution, a mounting error, lens distortion and
-sensor noise; the truth comes from the MJCF camera (vlr.camera.calibration_from_mujoco_camera)
-and the distortion put on the frames (sim.camera_effects), not from the calibration code."""
+sensor noise (vlr.sim.calibration_views); the truth comes from the MJCF camera
+(vlr.camera.calibration_from_mujoco_camera) and the distortion put on the frames
+(sim.camera_effects), not from the calibration code."""
 
 from __future__ import annotations
 
-import math
 import os
+import re
 import subprocess
 import sys
-from pathlib import Path
 
 import cv2
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from models.make_tags import TEXTURE_PER_BLACK, tag_image
-from sim.camera_effects import CameraEffects, apply_effects, distortion_maps
-from sim.model import CAMERA_FOVY_DEG, CAMERA_HEIGHT
-from vlr.camera import CameraCalibration, calibration_from_mujoco_camera, load_calibration
+from vlr.camera import load_calibration
 from vlr.cli import main
 from vlr.perception import lens
 
 WIDTH, HEIGHT = 640, 480
-DISTORTION = (-0.12, 0.03, 4e-4, -3e-4, 0.0)
-NOISE = 1.5                                   # grey levels
-MARGIN = (48, 36)                             # px rendered beyond each side, see `rendered`
 SQUARE, SQUARES = 0.012, (7, 5)               # the command's default board
 DPI = 254                                     # 120 px per 12 mm square
-# The camera is mounted 1.5 mm and 1 mm off the palm axis and tilted by about 2 degrees.
-CAMERA_POS = (0.0015, -0.001, CAMERA_HEIGHT)
-CAMERA_TILT_DEG = (1.5, -1.2, 0.8)
 TAG_ID, TAG_SIZE = 7, 0.02
 TAG_POSE = (0.003, -0.004, 0.065, 4.0, -6.0, 25.0)  # palm frame: m, rotation vector deg
 # Board poses in the palm: centre (x, y, z) [m] and rotation vector [deg] (identity: facing
@@ -54,101 +45,37 @@ TAG_ARGS = ["--tag-id", str(TAG_ID), "--tag-size", str(TAG_SIZE),
             "--tag-pose", *map(str, TAG_POSE)]
 
 
-def _scene_xml(board_png: Path, board_size: tuple[float, float], tag_png: Path, fovy: float,
-               width: int, height: int) -> str:
-    cam_quat = (Rotation.from_rotvec(CAMERA_TILT_DEG, degrees=True)
-                * Rotation.from_euler("x", 180, degrees=True)).as_quat(scalar_first=True)
-    side = TAG_SIZE * TEXTURE_PER_BLACK
-    # Emissive, unlit materials: the texture's grey levels reach the image unshaded. Each
-    # card is a thin box turned by pi about x so that its textured face, at z = 0 of its body,
-    # looks at the camera unmirrored (as sim/model.py does for the object tags).
-    return f"""<mujoco>
-      <visual><headlight ambient="0 0 0" diffuse="0 0 0" specular="0 0 0"/>
-        <quality offsamples="8"/><global offwidth="{width}" offheight="{height}"/></visual>
-      <asset>
-        <texture name="board" type="2d" file="{board_png}"/>
-        <texture name="tag" type="2d" file="{tag_png}"/>
-        <material name="board" texture="board" emission="1" specular="0" rgba="1 1 1 1"/>
-        <material name="tag" texture="tag" emission="1" specular="0" rgba="1 1 1 1"/>
-      </asset>
-      <worldbody>
-        <camera name="palm_camera" pos="{' '.join(map(str, CAMERA_POS))}"
-                quat="{' '.join(map(str, cam_quat))}" fovy="{fovy!r}"/>
-        <body name="board" mocap="true" pos="0 0 -1">
-          <geom type="box" size="{board_size[0] / 2} {board_size[1] / 2} 0.0005"
-                pos="0 0 0.0005" quat="0 1 0 0" material="board"/>
-        </body>
-        <body name="tag" mocap="true" pos="0 0 -1">
-          <geom type="box" size="{side / 2} {side / 2} 0.0005" pos="0 0 0.0005"
-                quat="0 1 0 0" material="tag"/>
-        </body>
-      </worldbody></mujoco>"""
-
-
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
-    """Board views and a tag image as the distorting, noisy palm camera sees them, and the
-    true calibration: {"views": DIR, "tag": FILE, "board": FILE, "truth": CameraCalibration}.
-
-    A barrel lens's image corners see rays from outside the pinhole field of view, so the
-    scene is rendered MARGIN px larger on each side at the same focal length (a wider fovy);
-    each output pixel then reads that render at its undistorted position (the maps of
-    sim.camera_effects, shifted by the margin) and the sensor adds noise."""
+    """Board views at BOARD_POSES and a tag image as the distorting, noisy palm camera sees
+    them (the lens and noise of calibration_views.DEFAULT_EFFECTS), and the true calibration:
+    {"views": DIR, "tag": FILE, "truth": CameraCalibration}."""
     os.environ.setdefault("MUJOCO_GL", "egl")
-    mujoco = pytest.importorskip("mujoco")
+    views_module = pytest.importorskip("vlr.sim.calibration_views")
+    from vlr.hardware.camera_calibration import BoardSpec
+
     root = tmp_path_factory.mktemp("camcal")
     board_png = root / "board.png"
     assert main(["camera-calibrate", "--print-board", str(board_png), "--dpi", str(DPI)]) == 0
-    tex = cv2.imread(str(board_png), cv2.IMREAD_GRAYSCALE)
     pps = round(SQUARE / 0.0254 * DPI)
-    assert tex.shape == ((SQUARES[1] + 1) * pps, (SQUARES[0] + 1) * pps)  # half-square margin
-    board_size = (tex.shape[1] / pps * SQUARE, tex.shape[0] / pps * SQUARE)
-    tag_png = root / "tag_texture.png"
-    cv2.imwrite(str(tag_png), tag_image(TAG_ID))
-    mx, my = MARGIN
-    wide_w, wide_h = WIDTH + 2 * mx, HEIGHT + 2 * my
-    f = (HEIGHT / 2) / math.tan(math.radians(CAMERA_FOVY_DEG) / 2)
-    wide_fovy = math.degrees(2 * math.atan((wide_h / 2) / f))
-    model = mujoco.MjModel.from_xml_string(
-        _scene_xml(board_png, board_size, tag_png, wide_fovy, wide_w, wide_h))
-    data = mujoco.MjData(model)
-    mujoco.mj_forward(model, data)
-    wide = calibration_from_mujoco_camera(float(model.cam_fovy[0]), wide_w, wide_h,
-                                          data.cam_xpos[0], data.cam_xmat[0].reshape(3, 3))
-    K = wide.K.copy()
-    K[:2, 2] -= MARGIN  # the output is the render's centre crop
-    truth = CameraCalibration(WIDTH, HEIGHT, K, np.asarray(DISTORTION), wide.T_palm_cam)
-    map_x, map_y = distortion_maps(K, DISTORTION, WIDTH, HEIGHT)
-    map_x, map_y = map_x + np.float32(mx), map_y + np.float32(my)
-    noise = CameraEffects(noise_std=NOISE)
-    rng = np.random.default_rng(0)
+    # The printed board is the one rendered: squares and a half-square margin.
+    assert cv2.imread(str(board_png), cv2.IMREAD_GRAYSCALE).shape == \
+        ((SQUARES[1] + 1) * pps, (SQUARES[0] + 1) * pps)
+    assert pps == views_module.PIXELS_PER_SQUARE
+    tag = views_module.SimTag(TAG_ID, TAG_SIZE, TAG_POSE)
     try:
-        renderer = mujoco.Renderer(model, wide_h, wide_w)
-    except Exception as exc:  # no EGL on this machine
-        pytest.skip(f"MuJoCo offscreen rendering unavailable: {exc}")
-    away = np.array([0.0, 0.0, -1.0])  # behind the camera
-
-    def shot(board_pose, tag_pose) -> np.ndarray:
-        for mocap, pose in ((0, board_pose), (1, tag_pose)):
-            pos, rotvec = pose if pose is not None else (away, (0, 0, 0))
-            data.mocap_pos[mocap] = pos
-            data.mocap_quat[mocap] = Rotation.from_rotvec(rotvec, degrees=True).as_quat(
-                scalar_first=True)
-        mujoco.mj_forward(model, data)
-        renderer.update_scene(data, camera="palm_camera")
-        image = cv2.remap(renderer.render(), map_x, map_y, cv2.INTER_LINEAR)
-        return cv2.cvtColor(apply_effects(image, noise, rng, truth), cv2.COLOR_RGB2BGR)
-
+        sim = views_module.render_board_views(BoardSpec().board(), BOARD_POSES, tag=tag,
+                                              seed=0)
+    except views_module.RenderingUnavailable as exc:
+        pytest.skip(str(exc))
+    assert (sim.truth.width, sim.truth.height) == (WIDTH, HEIGHT)
     views = root / "views"
     views.mkdir()
-    try:
-        for k, pose in enumerate(BOARD_POSES):
-            cv2.imwrite(str(views / f"view_{k:02d}.png"), shot(pose, None))
-        tag = root / "tag.png"
-        cv2.imwrite(str(tag), shot(None, (TAG_POSE[:3], TAG_POSE[3:])))
-    finally:
-        renderer.close()
-    return {"views": views, "tag": tag, "board": board_png, "truth": truth}
+    for k, image in enumerate(sim.boards):
+        cv2.imwrite(str(views / f"view_{k:02d}.png"), cv2.cvtColor(image, cv2.COLOR_RGB2BGR))
+    tag_png = root / "tag.png"
+    cv2.imwrite(str(tag_png), cv2.cvtColor(sim.tag, cv2.COLOR_RGB2BGR))
+    return {"views": views, "tag": tag_png, "truth": sim.truth}
 
 
 def _errors(cal, truth) -> dict[str, float]:
@@ -208,8 +135,8 @@ def test_calibrates_rendered_views_from_a_folder(rendered, tmp_path, capsys) -> 
 
 def test_live_camera_keeps_moving_views_until_covered(rendered, tmp_path, monkeypatch,
                                                        capsys) -> None:
-    import hardware.camera_calibration as cc
-    from hardware.camera import FakeCamera
+    import vlr.hardware.camera_calibration as cc
+    from vlr.hardware.camera import FakeCamera
 
     board = [cv2.imread(str(p)) for p in sorted(rendered["views"].iterdir())]
     tag = cv2.imread(str(rendered["tag"]))
@@ -219,7 +146,7 @@ def test_live_camera_keeps_moving_views_until_covered(rendered, tmp_path, monkey
     def source():
         return cv2.cvtColor(next(frames), cv2.COLOR_BGR2RGB)
 
-    monkeypatch.setattr("hardware.camera.OpenCVCamera",
+    monkeypatch.setattr("vlr.hardware.camera.OpenCVCamera",
                         lambda index, width=None, height=None: FakeCamera(source=source))
     monkeypatch.setattr("builtins.input", lambda prompt="": "")
     monkeypatch.setattr(cc, "TAG_TIMEOUT_S", 30.0)
@@ -301,3 +228,127 @@ def test_command_line_error_exits_2_without_traceback(tmp_path) -> None:
     assert proc.stderr.strip().splitlines() == [
         f"vlr camera-calibrate: error: --images {empty}: no images "
         "(.png, .jpg, .jpeg, .bmp, .tif, .tiff) in it"]
+
+
+# --------------------------------------------------------------------------- --sim
+
+def _sim_table(text: str) -> dict[str, float]:
+    """The --sim table's signed errors: fx..cy [%], k1..k3, and the lens and pose lines."""
+    out = {m[0]: float(m[1]) for m in re.findall(r"^  (f[xy]|c[xy]) \[px\] .* ([+-][\d.]+)%$",
+                                                 text, re.M)}
+    out |= {m[0]: float(m[1]) for m in re.findall(r"^  (k1|k2|p1|p2|k3) .* ([+-][\d.]+)$",
+                                                  text, re.M)}
+    lens_line = re.search(r"max ([\d.]+) where the board was seen, ([\d.]+) anywhere", text)
+    pose = re.search(r"camera in the palm: ([\d.]+) mm and ([\d.]+) deg off", text)
+    out |= {"lens_seen_px": float(lens_line[1]), "lens_max_px": float(lens_line[2]),
+            "position_mm": float(pose[1]), "rotation_deg": float(pose[2])}
+    return out
+
+
+def test_sim_calibrates_its_own_views_against_the_known_camera(rendered, tmp_path,
+                                                                capsys) -> None:
+    """`--sim` at its defaults: the YAML written, the printed errors are the YAML's errors
+    against the camera the views were rendered with (the fixture's truth: the same mounting,
+    lens and size), and they are small."""
+    out = tmp_path / "camera.yaml"
+    assert main(["camera-calibrate", "--sim", "--out", str(out)]) == 0
+    text = capsys.readouterr().out
+    assert "view 15 (view_015.png)" in text
+    cal = load_calibration(out)
+    truth = rendered["truth"]
+    assert (cal.width, cal.height) == (WIDTH, HEIGHT)
+    err = _errors(cal, truth)
+    table = _sim_table(text)
+    print(text, {k: round(v, 6) for k, v in err.items()}, sep="\n")
+    for key, rc in {"fx": (0, 0), "fy": (1, 1), "cx": (0, 2), "cy": (1, 2)}.items():
+        assert table[key] == pytest.approx(100 * (cal.K[rc] / truth.K[rc] - 1), abs=6e-4)
+    for k, name in enumerate(("k1", "k2", "p1", "p2", "k3")):
+        assert table[name] == pytest.approx(cal.dist[k] - truth.dist[k], abs=6e-6)
+    assert table["position_mm"] == pytest.approx(err["position_mm"], abs=6e-4)
+    assert table["rotation_deg"] == pytest.approx(err["rotation_deg"], abs=6e-4)
+    _assert_accurate(err)
+    assert table["lens_seen_px"] < 1.0 and table["lens_max_px"] < 5.0
+    assert _distortion_gap_px(cal, truth, 300.0) < 1.0
+    assert "# --sim --seed 0: fx " in out.read_text()
+    assert [p.name for p in tmp_path.iterdir()] == ["camera.yaml"]
+
+
+def test_sim_is_seeded_and_its_views_calibrate_the_same_from_a_folder(rendered, tmp_path,
+                                                                       capsys) -> None:
+    def sim(name: str, *extra: str) -> tuple[str, object]:
+        out = tmp_path / name
+        assert main(["camera-calibrate", "--sim", "--sim-views", "10", *extra, "--out",
+                     str(out)]) == 0
+        text = capsys.readouterr().out
+        table = text[text.index("against the sim's truth"):text.index("wrote ")]
+        return table, load_calibration(out)
+
+    saved = tmp_path / "views"
+    table, cal = sim("a.yaml", "--save-views", str(saved))
+    again, cal_again = sim("b.yaml")
+    assert again == table
+    assert (tmp_path / "a.yaml").read_text() == (tmp_path / "b.yaml").read_text()
+    other, cal_other = sim("c.yaml", "--seed", "1")
+    assert other != table and not np.array_equal(cal_other.K, cal.K)
+    _assert_accurate(_errors(cal_other, rendered["truth"]))
+
+    # The saved views through --images: the same detection and calibration, the same camera.
+    assert sorted(p.name for p in saved.iterdir()) == [f"view_{k:03d}.png" for k in
+                                                       range(1, 11)]
+    assert main(["camera-calibrate", "--images", str(saved), "--out",
+                 str(tmp_path / "a.yaml")]) == 0
+    np.testing.assert_array_equal(load_calibration(tmp_path / "a.yaml").K, cal.K)
+    np.testing.assert_array_equal(load_calibration(tmp_path / "a.yaml").dist, cal.dist)
+
+
+@pytest.mark.parametrize("extra, named", [
+    (["--images", "views"], "--images views and --sim: give one source"),
+    (["--camera", "0"], "--camera 0 and --sim: give one source"),
+    (["--sim-views", "5"], "--sim-views 5: must be from --min-views (10) to 200"),
+    (["--sim-views", "12", "--min-views", "13"], "--sim-views 12: must be from --min-views"),
+    (["--sim-views", "500"], "--sim-views 500:"),
+    (["--tag-image", "tag.png"], "--tag-image tag.png: --sim renders its own tag view"),
+    (["--width", "320", "--height", "240"], "--width 320 --height 240: --sim renders"),
+    (["--tag-size", "-1"], "--tag-size -1.0: must be a length > 0"),
+    (["--seed", "-1"], "--seed -1: must be 0 or more"),
+])
+def test_sim_bad_input_is_one_line_and_no_file(extra, named, tmp_path, capsys) -> None:
+    out = tmp_path / "camera.yaml"
+    assert main(["camera-calibrate", "--sim", *extra, "--out", str(out)]) == 2
+    assert named in _error_line(capsys)
+    assert not out.exists()
+
+
+def test_sim_without_rendering_is_one_line(tmp_path, monkeypatch, capsys) -> None:
+    pytest.importorskip("mujoco")
+
+    def no_egl(*args, **kwargs):
+        raise RuntimeError("cannot initialize EGL\nno display")
+
+    monkeypatch.setattr("mujoco.Renderer", no_egl)
+    out = tmp_path / "camera.yaml"
+    assert main(["camera-calibrate", "--sim", "--out", str(out)]) == 2
+    assert "MuJoCo cannot render offscreen here" in _error_line(capsys)
+    monkeypatch.setitem(sys.modules, "vlr.sim.calibration_views", None)  # import fails
+    assert main(["camera-calibrate", "--sim", "--out", str(out)]) == 2
+    assert "--sim needs MuJoCo rendering" in _error_line(capsys)
+    assert not out.exists()
+
+
+def test_sources_clash_in_one_line_without_usage(tmp_path) -> None:
+    proc = subprocess.run([sys.executable, "-m", "vlr.cli", "camera-calibrate", "--sim",
+                           "--images", str(tmp_path), "--out", str(tmp_path / "c.yaml")],
+                          capture_output=True, text=True, timeout=60)
+    assert proc.returncode == 2
+    assert proc.stderr.strip().splitlines() == [
+        f"vlr camera-calibrate: error: --images {tmp_path} and --sim: give one source of "
+        "board views (--images, --camera or --sim)"]
+
+
+def test_hardware_side_does_not_import_the_sim() -> None:
+    code = ("import sys, vlr.hardware.camera_calibration, vlr.hardware.camera; "
+            "print(sorted(m for m in sys.modules if m.startswith('vlr.sim') or m == 'mujoco'))")
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                          timeout=60)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout.strip() == "[]"

@@ -1,11 +1,11 @@
-"""sim.camera_effects: reproducible degradations, and lens distortion a calibration undoes."""
+"""vlr.sim.camera_effects: reproducible degradations, and lens distortion a calibration undoes."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from vlr.sim.camera_effects import CameraEffects, apply_effects, distorted_calibration
 
-from sim.camera_effects import CameraEffects, apply_effects, distorted_calibration
 from tests.tag_images import ideal_calibration, pose_cam_object, render_tag, rotation_error_deg
 from vlr.perception import lens, observe
 

@@ -108,7 +108,8 @@ def test_from_the_sim_s_true_joint_angles_the_surface_gives_its_true_contacts(ob
     """Scoring only: the sim's true joint angles in, its true pad contacts out. The pad prior's
     centre, the inner face, is 33 degrees off on the apple and the wine glass (beta) and 89 on
     the screwdriver's wrapped thumb (alpha)."""
-    from sim.backend import SimHand
+    from vlr.sim.backend import SimHand
+
     from vlr.spec import load_object
 
     with SimHand(obj, seed=0) as hand:

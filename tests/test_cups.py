@@ -1,4 +1,4 @@
-"""Cup stacking (`vlr/CupStacking-v1`, tasks/cups.py): the picked cup under the palm, the
+"""Cup stacking (`vlr/CupStacking-v2`, tasks/cups.py): the picked cup under the palm, the
 hardware backend refused in one line, `vlr task cups` writing its result and picture, and
 the nesting physics without the hand (the env checker and same-seed rollouts:
 tests/test_task_conventions.py). One cup instead of four and a short identification keep it
@@ -13,7 +13,7 @@ import gymnasium as gym
 import numpy as np
 import pytest
 
-import tasks
+from vlr import tasks
 from vlr.errors import UserError
 
 QUICK = {"particles": 2000, "identify_iterations": 1, "n_cups": 1}
@@ -74,10 +74,9 @@ def test_a_cup_let_go_over_a_larger_one_nests_in_it(tilt_deg, offset_mm, nests):
     above its nested place over cup1, slides down cup1's tapered wall and sits nested; let
     go 25 mm off the axis, it lands on the rim and does not count."""
     import mujoco
-
-    from sim.model import cup_dimensions
-    from sim.scenes import CupsHand
-    from tasks.cups import nested
+    from vlr.sim.model import cup_dimensions
+    from vlr.sim.scenes import CupsHand
+    from vlr.tasks.cups import nested
 
     hand = CupsHand(["cup1", "cup2"], seed=0)
     hand.reset_scene()
@@ -104,7 +103,8 @@ def test_a_cup_let_go_over_a_larger_one_nests_in_it(tilt_deg, offset_mm, nests):
 def test_a_cup_spec_that_cannot_be_built_is_refused_by_name():
     from dataclasses import replace
 
-    from sim.model import build_object
+    from vlr.sim.model import build_object
+
     from vlr.spec import SpecError, load_object
 
     cup = load_object("cup5")
@@ -118,8 +118,8 @@ def test_a_standing_cup_touches_its_support_with_its_bottom_only(name):
     the table (or a larger cup's floor) meets the bottom disc alone: the wall corners that
     reached below it made three quarters of a cup scene's step."""
     import mujoco
+    from vlr.sim.model import WALL_CLEARANCE, build_scene, compile_scene, cup_dimensions
 
-    from sim.model import WALL_CLEARANCE, build_scene, compile_scene, cup_dimensions
     from vlr.spec import load_hand, load_object
 
     spec = load_object(name)

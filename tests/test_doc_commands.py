@@ -87,7 +87,7 @@ def _shell_commands(block: str, first_line: int, where: str) -> list[Shown]:
 
 def shown_commands() -> list[Shown]:
     """Every command and Python block of the docs, in order, then `vlr demo`'s hints."""
-    from sim.demo import NEXT_COMMANDS
+    from vlr.sim.demo import NEXT_COMMANDS
 
     found = []
     for doc in DOCS:
@@ -134,8 +134,11 @@ def _env() -> dict[str, str]:
 
 
 def _run_server(cmd: str, ready: str, cwd: Path) -> tuple[int, str]:
+    # Ctrl-C as a user's terminal delivers it: a suite started in the background by a
+    # non-interactive shell (`make test &`) inherits SIGINT ignored, and so would the server.
     proc = subprocess.Popen(["bash", "-c", f"exec {cmd}"], cwd=cwd, env=_env(),
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     seen, t0 = "", time.monotonic()
     try:
         while ready not in seen and time.monotonic() - t0 < 120:

@@ -15,8 +15,8 @@ import json
 
 import numpy as np
 import pytest
+from vlr.sim.gap import _ALL, _BASE, LADDER, GapSettings, filter_rung, gap_report, measure_gap
 
-from sim.gap import _ALL, _BASE, LADDER, GapSettings, filter_rung, gap_report, measure_gap
 from vlr.cli import main
 from vlr.errors import UserError
 from vlr.motion import MotionConfig
@@ -96,7 +96,8 @@ def test_bad_gap_settings_are_named(kw):
 
 
 def test_the_gap_defaults_to_the_sim_identifications_model_and_ramp():
-    from sim.backend import SimWorldOptions
+    from vlr.sim.backend import SimWorldOptions
+
     from vlr.settings import load_settings
 
     settings = GapSettings()
@@ -117,7 +118,8 @@ def test_a_hand_without_a_thumb_has_no_turn_split():
     slots name no thumb gets NaN, not another finger's axis."""
     from dataclasses import replace
 
-    from sim.gap import record_actions
+    from vlr.sim.gap import record_actions
+
     from vlr.spec import load_hand
 
     settings = GapSettings(object="apple", seed=0, actions=2, drift_actions=2)
@@ -136,7 +138,8 @@ def test_starting_from_the_sims_contact_loads():
     every action from there."""
     from dataclasses import replace
 
-    from sim.gap import _state, record_actions
+    from vlr.sim.gap import _state, record_actions
+
     from vlr.kinematics import HandModel
 
     settings = GapSettings(object="gelatin_box", seed=0, actions=6, drift_actions=6,
@@ -165,7 +168,7 @@ def test_the_model_wants_the_true_thumb_spring_from_the_true_states():
     are the estimator's lean, not the model's."""
     from dataclasses import replace
 
-    from sim.gap import record_actions
+    from vlr.sim.gap import record_actions
 
     # The default model and ramp: the sim identification's (rolling, stops at 17 N m/rad,
     # commands ramped over 0.1 s).
@@ -214,12 +217,12 @@ def test_the_model_wants_the_true_thumb_spring_from_the_true_states():
     (["--set", "world.options.ramp_time=0"], "world.options.ramp_time"),
 ])
 def test_a_bad_gap_argument_is_named_before_the_sim_runs(args, message, capsys, monkeypatch):
-    import sim.gap
+    import vlr.sim.gap
 
     def no_sim(settings):
         raise AssertionError("the sim ran")
 
-    monkeypatch.setattr(sim.gap, "record_actions", no_sim)
+    monkeypatch.setattr(vlr.sim.gap, "record_actions", no_sim)
     assert main(["gap", "--object", "toy_block", *args]) == 2
     assert message in capsys.readouterr().err
 

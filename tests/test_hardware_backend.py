@@ -15,12 +15,13 @@ import pytest
 pytest.importorskip("dynamixel_sdk", reason="the real hand's tests need the hardware extra "
                     "(pip install -e '.[hardware]')")
 
-from hardware.backend import HardwareHand, open_hand  # noqa: E402
-from hardware.bus import CommError, MotorFaultError, PortError  # noqa: E402
-from hardware.calibration import CalibrationError  # noqa: E402
-from hardware.camera import CameraError, FakeCamera, OpenCVCamera  # noqa: E402
-from hardware.control_table import CURRENT_UNIT_MA, HardwareError, Reg  # noqa: E402
-from hardware.tendons import TendonMap, resolve_zero  # noqa: E402
+from vlr.hardware.backend import HardwareHand, open_hand  # noqa: E402
+from vlr.hardware.bus import CommError, MotorFaultError, PortError  # noqa: E402
+from vlr.hardware.calibration import CalibrationError  # noqa: E402
+from vlr.hardware.camera import CameraError, FakeCamera, OpenCVCamera  # noqa: E402
+from vlr.hardware.control_table import CURRENT_UNIT_MA, HardwareError, Reg  # noqa: E402
+from vlr.hardware.tendons import TendonMap, resolve_zero  # noqa: E402
+
 from tests.hardware_fixtures import (  # noqa: E402
     CALIBRATION,
     OBJECT,
@@ -141,7 +142,7 @@ def test_overload_stops_the_run_with_decoded_bits(tmp_path):
 
 def test_fault_at_start_up_is_reported(tmp_path):
     cfg = make_config(tmp_path, fingers=STORED)
-    from hardware.emulate import build_emulator
+    from vlr.hardware.emulate import build_emulator
 
     emu, _ = build_emulator(cfg)
     emu.inject_hardware_error(3)
@@ -153,7 +154,7 @@ def test_fault_at_start_up_is_reported(tmp_path):
 
 def test_missing_motor_at_start_up_is_named(tmp_path):
     cfg = make_config(tmp_path, fingers=STORED)
-    from hardware.emulate import build_emulator
+    from vlr.hardware.emulate import build_emulator
 
     emu, _ = build_emulator(cfg)
     emu.silence(4)
@@ -166,7 +167,7 @@ def test_a_line_that_never_goes_taut(tmp_path):
     data = config_dict()
     data["fingers"]["right"]["direction"] = -1  # wired the wrong way round
     cfg = make_config(tmp_path, fingers=data["fingers"])
-    from hardware.emulate import build_emulator
+    from vlr.hardware.emulate import build_emulator
 
     emu, plant = build_emulator(cfg)
     plant.directions[3] = 1  # the motor really winds with +ticks

@@ -11,22 +11,21 @@ pytest.importorskip("dynamixel_sdk", reason="the real hand's tests need the hard
                     "(pip install -e '.[hardware]')")
 
 from dynamixel_sdk import PacketHandler  # noqa: E402
-
-from hardware.bus import (  # noqa: E402
+from vlr.hardware.bus import (  # noqa: E402
     CommError,
     MotorBus,
     MotorFaultError,
     MotorStatusError,
     PortError,
 )
-from hardware.control_table import (  # noqa: E402
+from vlr.hardware.control_table import (  # noqa: E402
     HardwareError,
     OperatingMode,
     Reg,
     describe_hardware_error,
 )
-from hardware.emulator import Emulator, KinematicPlant  # noqa: E402
-from hardware.protocol2 import PacketParser, crc16, encode, stuff, unstuff  # noqa: E402
+from vlr.hardware.emulator import Emulator, KinematicPlant  # noqa: E402
+from vlr.hardware.protocol2 import PacketParser, crc16, encode, stuff, unstuff  # noqa: E402
 
 IDS = (1, 2, 3)
 

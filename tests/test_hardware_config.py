@@ -5,9 +5,9 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from vlr.hardware.config import HardwareConfigError, load_config
+from vlr.hardware.control_table import OperatingMode
 
-from hardware.config import HardwareConfigError, load_config
-from hardware.control_table import OperatingMode
 from tests.extras import needs_hardware
 from tests.hardware_fixtures import config_dict, write_config
 from vlr.spec import SpecError

@@ -22,10 +22,11 @@ import pytest
 pytest.importorskip("dynamixel_sdk", reason="the real hand's tests need the hardware extra "
                     "(pip install -e '.[hardware]')")
 
-from hardware.bus import CommError, HardwareError, MotorBus, MotorFaultError  # noqa: E402
-from hardware.control_table import Reg  # noqa: E402
-from hardware.emulator import Emulator  # noqa: E402
-from hardware.protocol2 import Instruction  # noqa: E402
+from vlr.hardware.bus import CommError, HardwareError, MotorBus, MotorFaultError  # noqa: E402
+from vlr.hardware.control_table import Reg  # noqa: E402
+from vlr.hardware.emulator import Emulator  # noqa: E402
+from vlr.hardware.protocol2 import Instruction  # noqa: E402
+
 from tests.hardware_fixtures import config_dict, hand_on_emulator, make_config, write_config  # noqa: E402
 from vlr.cli import main  # noqa: E402
 
@@ -133,10 +134,10 @@ def test_a_spread_motor_that_faults_after_the_last_move_fails_the_close(tmp_path
 
 def test_a_spread_fault_mid_calibration_writes_no_file(tmp_path, monkeypatch, capsys):
     """Through the CLI: exit 2, one line naming the spread motor, torque off, no file."""
-    import hardware.emulate
+    import vlr.hardware.emulate
 
     emulators = []
-    build = hardware.emulate.build_emulator
+    build = vlr.hardware.emulate.build_emulator
 
     def faulty(cfg):
         emulator, plant = build(cfg)
@@ -145,7 +146,7 @@ def test_a_spread_fault_mid_calibration_writes_no_file(tmp_path, monkeypatch, ca
         emulators.append(emulator)
         return emulator, plant
 
-    monkeypatch.setattr(hardware.emulate, "build_emulator", faulty)
+    monkeypatch.setattr(vlr.hardware.emulate, "build_emulator", faulty)
     readings = iter(range(1, 100))
     monkeypatch.setattr("builtins.input", lambda prompt: " ".join([str(next(readings))] * 3))
     path = write_config(tmp_path, config_dict(fingers=STORED))

@@ -19,14 +19,14 @@ pytest.importorskip("dynamixel_sdk", reason="the real hand's tests need the hard
                     "(pip install -e '.[hardware]')")
 
 import serial  # noqa: E402
+from vlr.hardware.backend import HardwareHand  # noqa: E402
+from vlr.hardware.bus import HardwareError, MotorBus, MotorStatusError  # noqa: E402
+from vlr.hardware.camera import CameraError, FakeCamera  # noqa: E402
+from vlr.hardware.config import HardwareConfigError  # noqa: E402
+from vlr.hardware.control_table import Reg  # noqa: E402
+from vlr.hardware.emulate import build_emulator  # noqa: E402
+from vlr.hardware.emulator import Emulator  # noqa: E402
 
-from hardware.backend import HardwareHand  # noqa: E402
-from hardware.bus import HardwareError, MotorBus, MotorStatusError  # noqa: E402
-from hardware.camera import CameraError, FakeCamera  # noqa: E402
-from hardware.config import HardwareConfigError  # noqa: E402
-from hardware.control_table import Reg  # noqa: E402
-from hardware.emulate import build_emulator  # noqa: E402
-from hardware.emulator import Emulator  # noqa: E402
 from tests.hardware_fixtures import (  # noqa: E402
     CALIBRATION,
     OBJECT,
@@ -120,20 +120,21 @@ def test_bad_safety_settings_are_refused_naming_the_key(tmp_path, section, key, 
 def test_vlr_identify_stops_non_zero_naming_the_camera_and_writes_no_result(
         tmp_path, monkeypatch, capsys):
     """The simulated hand behind emulated motors; its camera dies after a few frames."""
-    pytest.importorskip("sim.backend")
-    import hardware.backend
-    import hardware.emulate
+    pytest.importorskip("vlr.sim.backend")
+    import vlr.hardware.backend
+    import vlr.hardware.emulate
+
     from vlr.cli import main
 
     emulators = []
-    build = hardware.emulate.build_emulator
+    build = vlr.hardware.emulate.build_emulator
 
     def recording(cfg):
         emulator, plant = build(cfg)
         emulators.append(emulator)
         return emulator, plant
-    monkeypatch.setattr(hardware.emulate, "build_emulator", recording)
-    make_camera = hardware.backend._camera
+    monkeypatch.setattr(vlr.hardware.emulate, "build_emulator", recording)
+    make_camera = vlr.hardware.backend._camera
 
     def dying_camera(cfg, calibration, plant):
         camera = make_camera(cfg, calibration, plant)
@@ -144,7 +145,7 @@ def test_vlr_identify_stops_non_zero_naming_the_camera_and_writes_no_result(
             return render() if count[0] <= 4 else None
         camera.source = source
         return camera
-    monkeypatch.setattr(hardware.backend, "_camera", dying_camera)
+    monkeypatch.setattr(vlr.hardware.backend, "_camera", dying_camera)
     path = write_config(tmp_path, sim_config_dict())
     out = tmp_path / "run"
     rc = main(["identify", "--backend", "hardware", "--config", str(path), "--particles",
@@ -224,9 +225,9 @@ def test_the_emulated_watchdog_is_fed_only_by_packets_to_its_motor():
 
 CHILD = """
 import sys, time
-from hardware.backend import HardwareHand
-from hardware.camera import FakeCamera
-from hardware.config import load_config
+from vlr.hardware.backend import HardwareHand
+from vlr.hardware.camera import FakeCamera
+from vlr.hardware.config import load_config
 from tests.hardware_fixtures import CALIBRATION, OBJECT
 from vlr.spec import load_hand
 

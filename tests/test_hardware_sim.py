@@ -11,12 +11,13 @@ import math
 import numpy as np
 import pytest
 
-pytest.importorskip("sim.backend")
+pytest.importorskip("vlr.sim.backend")
 pytest.importorskip("dynamixel_sdk", reason="the real hand's tests need the hardware extra "
                     "(pip install -e '.[hardware]')")
 
-from hardware.backend import open_hand  # noqa: E402
-from hardware.control_table import Reg  # noqa: E402
+from vlr.hardware.backend import open_hand  # noqa: E402
+from vlr.hardware.control_table import Reg  # noqa: E402
+
 from tests.hardware_fixtures import (  # noqa: E402
     hand_on_sim_plant,
     make_config,

@@ -220,7 +220,7 @@ def test_identify_bad_input_is_one_clear_line(tmp_path, capsys):
 def test_identify_hardware_backend_against_emulated_motors_and_sim(tmp_path):
     """The whole hardware path: SDK packets on a pty, emulated XM430s driving the MuJoCo hand,
     its rendered frames through the fake camera, into the same filter."""
-    import models
+    from vlr import models
 
     config = models.ROOT.parent / "hardware" / "example_sim_config.yaml"
     out = tmp_path / "hw"

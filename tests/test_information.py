@@ -12,8 +12,8 @@ import json
 
 import numpy as np
 import pytest
+from vlr.sim.crb import CrbSettings, crb_report
 
-from sim.crb import CrbSettings, crb_report
 from vlr.cli import main
 from vlr.errors import UserError
 from vlr.filter import ParticleFilter
@@ -157,20 +157,20 @@ def test_bad_crb_settings_are_named(kw):
 def test_crb_sweep_skips_a_trial_it_cannot_linearise(tmp_path, capsys, monkeypatch):
     """A sweep's trial whose model cannot be differenced is skipped and listed; the others'
     floors are still written."""
-    import sim.crb
+    import vlr.sim.crb
 
     sweep = tmp_path / "s.yaml"
     sweep.write_text(f"name: two\nout: {tmp_path / 'runs'}\nseeds: 0-1\n"
                      "settings: {world.backend: synthetic, "
                      "loop.max_iterations: 2}\ncases:\n  - {name: known hand}\n")
-    real = sim.crb.crb_report
+    real = vlr.sim.crb.crb_report
 
     def flaky(s):
         if s.trial.seed == 1:
             raise FloatingPointError("action 1: 3 of 49 solves failed; both steps of x")
         return real(s)
 
-    monkeypatch.setattr(sim.crb, "crb_report", flaky)
+    monkeypatch.setattr(vlr.sim.crb, "crb_report", flaky)
     out = tmp_path / "crb.json"
     assert main(["crb", "--sweep", str(sweep), "--json", str(out)]) == 0
     rep = json.loads(out.read_text())
@@ -208,7 +208,7 @@ def test_a_failed_step_leaves_a_one_sided_difference(synthetic_trace):
 def test_the_scales_that_meet_the_criterion_are_found_or_said_to_be_none():
     from types import SimpleNamespace
 
-    from sim.crb import _scale_for
+    from vlr.sim.crb import _scale_for
 
     def trace(floor: float):  # width = floor + 4 x the scale factor, as a bound behaves
         return SimpleNamespace(bound=lambda sp, sr, sigma_turn=0.0, sigma_tension=0.0:
@@ -266,7 +266,7 @@ def test_a_replay_runs_with_every_setting_its_trial_recorded():
     """A record's settings are the flat tree the trial ran (`Settings.flat()`): the replay
     loads them back whole, the joint stops and the sim's ramp as they were, and names a
     setting that does not load."""
-    from sim.crb import replay_commands
+    from vlr.sim.crb import replay_commands
 
     ran = _settings("sim", seed=1, filter__motion__limit_stiffness=40.0,
                     world__options__ramp_time=0.05)

@@ -25,9 +25,9 @@ def test_flags_set_the_level():
 
 def test_lines_keep_the_hardware_prefix(capsys):
     configure(logging.INFO)
-    logging.getLogger("hardware.backend").info("tendon zeros found")
-    logging.getLogger("hardware.backend").warning("motor 2 did not confirm torque off")
-    logging.getLogger("hardware.backend").debug("not shown")
+    logging.getLogger("vlr.hardware.backend").info("tendon zeros found")
+    logging.getLogger("vlr.hardware.backend").warning("motor 2 did not confirm torque off")
+    logging.getLogger("vlr.hardware.backend").debug("not shown")
     assert capsys.readouterr().err.splitlines() == [
         "[hardware] tendon zeros found",
         "[hardware] WARNING: motor 2 did not confirm torque off"]
@@ -45,8 +45,8 @@ def test_verbose_identify_logs_each_iteration_and_quiet_logs_nothing(tmp_path, c
 
 def test_the_hardware_backend_without_its_extra_is_one_line(tmp_path, monkeypatch, capsys):
     monkeypatch.setitem(sys.modules, "dynamixel_sdk", None)  # `import` raises ImportError
-    for name in ("hardware.backend", "hardware.bus", "hardware.calibration",
-                 "hardware.tendons"):
+    for name in ("vlr.hardware.backend", "vlr.hardware.bus", "vlr.hardware.calibration",
+                 "vlr.hardware.tendons"):
         monkeypatch.delitem(sys.modules, name, raising=False)
     get_backend.cache_clear()
     try:

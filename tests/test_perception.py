@@ -312,7 +312,8 @@ def test_pose_on_mujoco_renders(tmp_path) -> None:
     the palm frame: O's convention, the texture mapping and the calibration agree."""
     os.environ.setdefault("MUJOCO_GL", "egl")
     mujoco = pytest.importorskip("mujoco")
-    from models.make_tags import TEXTURE_PER_BLACK, tag_image
+    from vlr.models.make_tags import TEXTURE_PER_BLACK, tag_image
+
     from vlr.camera import calibration_from_mujoco_camera
 
     png = tmp_path / "tag.png"

@@ -10,8 +10,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import models
 from tests.extras import needs_hardware
+from vlr import models
 from vlr.cli import main
 from vlr.errors import UserError
 from vlr.filter import FilterConfig
@@ -312,7 +312,7 @@ def test_an_explicit_setting_wins_over_the_backends_default():
 def test_the_sim_moves_as_the_hardware_backend_does():
     """The sim's identification ramps each command change over the hardware backend's
     default move (docs/DECISIONS.md); a trial may say otherwise, on the sim only."""
-    from hardware.config import TendonMotion as HardwareMotion
+    from vlr.hardware.config import TendonMotion as HardwareMotion
 
     hw = HardwareMotion(spool_radius=0.005, max_step=1e-3, range=(0.0, 0.01))
     assert _load("sim").world.options["ramp_time"] == pytest.approx(

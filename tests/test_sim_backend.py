@@ -2,8 +2,8 @@
 
 import numpy as np
 import pytest
+from vlr.sim.backend import SimHand, SimOptions
 
-from sim.backend import SimHand, SimOptions
 from vlr.explore import ExplorationRange, random_action
 from vlr.hand import CommandError, Hand
 from vlr.spec import SpecError

@@ -3,9 +3,9 @@
 import mujoco
 import numpy as np
 import pytest
+from vlr.sim.backend import SimHand
+from vlr.sim.camera_check import camera_trial
 
-from sim.backend import SimHand
-from sim.camera_check import camera_trial
 from vlr.perception import observe
 
 OBJECTS = ["apple", "wine_glass", "toy_block", "flat_screwdriver", "gelatin_box"]
@@ -55,7 +55,7 @@ def test_blacked_out_frame_is_no_observation():
 
 
 def test_lower_resolution_calibration_matches_its_frames():
-    from sim.backend import SimOptions
+    from vlr.sim.backend import SimOptions
 
     with SimHand("apple", options=SimOptions(width=320, height=240)) as hand:
         hand.grasp()
@@ -73,7 +73,7 @@ def test_a_hand_left_open_exits_without_egl_errors():
     import subprocess
     import sys
 
-    script = ("from sim.backend import SimHand\nfrom sim.camera import render_scene\n"
+    script = ("from vlr.sim.backend import SimHand\nfrom vlr.sim.camera import render_scene\n"
               "h = SimHand(object='apple', seed=0)\nh.grab_frame()\nrender_scene(h)\n")
     env = dict(os.environ, MUJOCO_GL="egl")
     r = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True,

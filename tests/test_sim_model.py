@@ -3,9 +3,9 @@
 import mujoco
 import numpy as np
 import pytest
+from vlr.sim.model import build_hand, compile_scene, load_scene
 
-import models
-from sim.model import build_hand, compile_scene, load_scene
+from vlr import models
 from vlr.spec import available_fingers, available_hands, available_objects, load_finger, load_hand
 
 HANDS = ["modelo", "nh1", "nh2", "nh3"]
@@ -84,7 +84,7 @@ def test_tendon_closes_proximal_first_then_distal():
 
 
 def test_distal_flexes_after_contact():
-    from sim.backend import SimHand
+    from vlr.sim.backend import SimHand
 
     hand = SimHand("apple")
     hand.grasp()  # the object is held by a helper weld while the hand closes

@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-import models
+from vlr import models
 from vlr.cli import main
 from vlr.spec import (
     SpecError,

@@ -1,8 +1,12 @@
-"""The task environments as Gymnasium-Robotics' goal environments, over every registered id:
-the spec (step limit, checker on), the spaces, `compute_reward` against the step rewards,
-`is_success` and no ground truth in `info` unless asked, gymnasium's env checker, a same-seed
-rollout, pickling, a 2-env AsyncVectorEnv with autoreset and the common wrappers, failures
-that end an episode instead of raising, and bad input in one line.
+"""The task environments as Gymnasium-Robotics' goal environments: the spec (step limit,
+checker on, reward type) and the spaces of every registered id; `step`'s reward, terminated
+and truncated against `compute_reward`, `compute_terminated` and `compute_truncated` (one
+call and a batch) over rollouts of both rewards of each task, and Gymnasium-Robotics' own
+`GoalEnv` checks; then, on one id per task (the sparse one: the dense twin differs in the
+reward only), `is_success` and no ground truth in `info` unless asked, gymnasium's env
+checker without a warning, a same-seed rollout, pickling, a 2-env AsyncVectorEnv with
+autoreset and the common wrappers, failures that end an episode instead of raising, and bad
+input in one line.
 
 Settings that keep CI fast: handwriting and the maze without identification (a reset is a
 grasp), cup stacking (which places each cup by its identified VLR) with a small filter that
@@ -18,10 +22,12 @@ import pickle
 import gymnasium as gym
 import numpy as np
 import pytest
+from gymnasium.envs.registration import load_env_creator
 from gymnasium.utils.env_checker import check_env
+from vlr.tasks.base import _goal_distances
 
-import tasks
 from tests.env_rollout import rollout, same
+from vlr import tasks
 
 FAST = {
     tasks.HANDWRITING: {"identify": False, "word": "I"},
@@ -31,21 +37,41 @@ FAST = {
 }
 if os.environ.get("VLR_TASKS_AT_DEFAULTS") == "1":
     FAST = {env_id: {} for env_id in FAST}
-IDS = list(tasks.ENVIRONMENTS)
+FAST.update({tasks.DENSE[env_id]: kwargs for env_id, kwargs in list(FAST.items())})
+IDS = list(tasks.DENSE)                 # one id per task: the sparse one
+ALL_IDS = list(tasks.ENVIRONMENTS)      # both rewards of each task
 ACTIONS = np.array([[0.5, -0.5, 0.25], [-1.0, 0.5, 0.5], [0.0, 0.0, -0.5]], dtype=np.float32)
+# One move per target: the episode ends (terminated) within a few steps.
+SHORT = {"vlr/Handwriting": {"steps_per_waypoint": 1},
+         "vlr/MarbleMaze": {"steps_per_run": 1, "dwell": 0.0},
+         "vlr/CupStacking": {"steps_per_cup": 1}}
+
+
+def _short(env_id: str) -> dict:
+    task = env_id.split("-")[0].removesuffix("Dense")
+    return {**FAST[env_id], **SHORT[task]}
 
 
 def test_every_registered_id_is_covered_here():
-    assert set(FAST) == set(gym.registry) & {i for i in gym.registry if i.startswith("vlr/")}
+    registered = {i for i in gym.registry if i.startswith("vlr/")}
+    assert set(FAST) == set(ALL_IDS) == registered
+    # Fetch's naming: the plain id sparse, a `Dense` suffix dense, one version for both.
+    assert tasks.DENSE == {"vlr/Handwriting-v2": "vlr/HandwritingDense-v2",
+                           "vlr/MarbleMaze-v2": "vlr/MarbleMazeDense-v2",
+                           "vlr/CupStacking-v2": "vlr/CupStackingDense-v2"}
 
 
-@pytest.mark.parametrize("env_id", IDS)
+@pytest.mark.parametrize("env_id", ALL_IDS)
 def test_spec_spaces_and_goal_keys(env_id):
     spec = gym.spec(env_id)
-    assert spec.max_episode_steps == tasks.ENVIRONMENTS[env_id][1]
+    reg = tasks.ENVIRONMENTS[env_id]
+    assert spec.max_episode_steps == reg.max_episode_steps
+    assert spec.kwargs == {"reward_type": reg.reward_type}
+    assert reg.reward_type == ("dense" if env_id in tasks.DENSE.values() else "sparse")
     assert not spec.disable_env_checker
     env = gym.make(env_id, **FAST[env_id])   # nothing is opened before reset
     try:
+        assert env.unwrapped.reward_type == reg.reward_type
         assert "PassiveEnvChecker" in str(env) and "TimeLimit" in str(env)
         assert env.action_space == gym.spaces.Box(-1.0, 1.0, (3,), np.float32)
         assert set(env.observation_space.spaces) == {"observation", "achieved_goal",
@@ -55,30 +81,108 @@ def test_spec_spaces_and_goal_keys(env_id):
         env.close()
 
 
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_step_returns_what_the_goal_functions_give(env_id):
+    """Gymnasium-Robotics' contract: reward, terminated and truncated are `compute_reward`,
+    `compute_terminated` and `compute_truncated` of the returned goals and info, one step at
+    a time and over the whole rollout at once (HER relabels in batches). Sparse: -1 or 0,
+    Fetch's; dense: minus the distance. The episode runs until the task terminates it."""
+    env = gym.make(env_id, **_short(env_id))
+    u = env.unwrapped
+    try:
+        _, info = env.reset(seed=0)
+        assert isinstance(info["is_success"], float) and not info["task_done"]
+        steps = []
+        for k in range(20):
+            obs, reward, terminated, truncated, info = env.step(ACTIONS[k % len(ACTIONS)])
+            ag, dg = obs["achieved_goal"], obs["desired_goal"]
+            assert isinstance(reward, float) and type(terminated) is type(truncated) is bool
+            assert reward == u.compute_reward(ag, dg, info)
+            assert terminated == u.compute_terminated(ag, dg, info)
+            assert truncated == u.compute_truncated(ag, dg, info)
+            assert info["is_success"] in (0.0, 1.0) and isinstance(info["is_success"], float)
+            steps.append((ag, dg, info, reward, terminated, truncated))
+            if terminated or truncated:
+                break
+        assert terminated and not truncated and info["task_done"]
+        ag, dg, infos, rewards, ends, cuts = (np.array(v) for v in zip(*steps, strict=True))
+        np.testing.assert_array_equal(u.compute_reward(ag, dg, infos), rewards)
+        np.testing.assert_array_equal(u.compute_terminated(ag, dg, infos), ends)
+        np.testing.assert_array_equal(u.compute_truncated(ag, dg, infos), cuts)
+        # ... and over a vector env's info: a dict of arrays, one value per env.
+        stacked = {k: np.array([i[k] for i in infos], dtype=object)
+                   for k in ("task_done", "grasp_lost", "identification_failed", "moves")}
+        np.testing.assert_array_equal(u.compute_reward(ag, dg, stacked), rewards)
+        np.testing.assert_array_equal(u.compute_terminated(ag, dg, stacked), ends)
+        np.testing.assert_array_equal(u.compute_truncated(ag, dg, stacked), cuts)
+        success = np.array([i["is_success"] for i in infos])
+        if u.reward_type == "sparse":
+            np.testing.assert_array_equal(rewards, success - 1.0)
+        else:
+            pos_mm, rot_deg = _goal_distances(u.goal_rows, ag, dg)
+            d = {"position": pos_mm, "rotation": rot_deg,
+                 "pose": np.hypot(pos_mm, u.controller_config.alpha * rot_deg)}[u.goal_rows]
+            np.testing.assert_allclose(rewards, -d)
+        # HER's relabelling (empty infos): the achieved goal as the desired one is a success.
+        relabelled = u.compute_reward(ag, ag, [{}] * len(ag))
+        np.testing.assert_allclose(relabelled, np.zeros(len(ag)), atol=1e-6)
+    finally:
+        env.close()
+
+
+@pytest.mark.parametrize("env_id", IDS)
+def test_gymnasium_robotics_goal_env_checks(env_id):
+    """Gymnasium-Robotics' `GoalEnv` as a base of the task's class (tasks/base.py does not
+    import it: docs/DECISIONS.md): its `reset` checks the observation space, and the
+    three goal functions it leaves abstract are the task's, with its signatures."""
+    import inspect
+
+    core = pytest.importorskip(
+        "gymnasium_robotics.core",
+        reason="Gymnasium-Robotics is in the dev extra (pip install -e '.[dev]')")
+    cls = load_env_creator(gym.spec(env_id).entry_point)
+    checked = type(f"Goal{cls.__name__}", (cls, core.GoalEnv), {})
+    for name in ("compute_reward", "compute_terminated", "compute_truncated"):
+        assert getattr(checked, name) is getattr(cls, name)
+        assert (list(inspect.signature(getattr(cls, name)).parameters)
+                == list(inspect.signature(getattr(core.GoalEnv, name)).parameters))
+    env = checked(reward_type=tasks.ENVIRONMENTS[env_id].reward_type, **FAST[env_id])
+    try:
+        obs, info = env.reset(seed=0)   # GoalEnv.reset's checks run first
+        assert env.observation_space.contains(obs)
+        obs, reward, terminated, truncated, info = env.step(ACTIONS[0])
+        assert reward == env.compute_reward(obs["achieved_goal"], obs["desired_goal"], info)
+        env.observation_space = gym.spaces.Dict({"observation": env.observation_space[
+            "observation"]})
+        with pytest.raises(gym.error.Error, match="achieved_goal"):
+            env.reset(seed=0)            # the check can fail
+    finally:
+        env.close()
+
+
 @pytest.mark.parametrize("env_id", IDS)
 def test_env_checker_rewards_success_and_no_truth(env_id):
+    import warnings
+
     env = gym.make(env_id, render_mode="rgb_array", **FAST[env_id])
     try:
         env.reset(seed=0)   # seeded: check_env also resets without a seed, which would draw
-        check_env(env.unwrapped)  # one from the OS and make the test vary run to run
+        # one from the OS and make the test vary run to run. No warning, as
+        # Gymnasium-Robotics' own test of its environments asks.
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            check_env(env.unwrapped)
+        assert not [str(w.message) for w in caught]
         obs, info = env.reset(seed=1)
-        assert "truth" not in info and info["is_success"] in (True, False)
+        assert "truth" not in info and info["is_success"] in (0.0, 1.0)
         frame = env.render()
         assert frame.dtype == np.uint8 and frame.ndim == 3 and frame.shape[2] == 3
         u = env.unwrapped
-        achieved, desired, rewards = [], [], []
         for a in ACTIONS:
             obs, reward, terminated, truncated, info = env.step(a)
-            assert "truth" not in info and isinstance(info["is_success"], bool)
+            assert "truth" not in info and isinstance(info["is_success"], float)
             # The change applied is the action times max_step, unless the band clipped it.
             assert np.all(np.abs(info["action_m"]) <= np.abs(a.astype(float)) * u.max_step + 1e-12)
-            achieved.append(obs["achieved_goal"])
-            desired.append(obs["desired_goal"])
-            rewards.append(reward)
-            assert reward == u.compute_reward(obs["achieved_goal"], obs["desired_goal"], info)
-        # Vectorised, as HER relabels: one call over the batch gives each step's reward.
-        np.testing.assert_allclose(u.compute_reward(np.array(achieved), np.array(desired),
-                                                    None), rewards)
     finally:
         env.close()
 
@@ -139,6 +243,35 @@ def test_async_vector_env_with_autoreset(env_id):
         envs.close()
 
 
+def _at_defaults(env_id: str) -> gym.Env:
+    return gym.wrappers.FlattenObservation(gym.make(env_id, max_episode_steps=2))
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
+def test_forked_workers_run_after_the_parent_used_an_env(env_id):
+    """Fork is gymnasium's (and Stable-Baselines3's) default start method on Linux: workers
+    forked from a process that has already identified a grasp and rendered its camera (a
+    user reading the spaces, the checker first) run too, at the defaults. numba's GNU
+    OpenMP layer aborted them and Mesa's llvmpipe threads hung them; `vlr` picks numba's
+    fork-safe layer and `sim` renders on the caller's thread."""
+    parent = gym.make(env_id)
+    try:
+        parent.reset(seed=0)
+    finally:
+        parent.close()
+    envs = gym.vector.AsyncVectorEnv([functools.partial(_at_defaults, env_id)] * 2)
+    try:
+        # With a timeout: a hung or aborted worker leaves the parent waiting for ever.
+        envs.reset_async(seed=[0, 1])
+        obs, _ = envs.reset_wait(timeout=300)
+        assert obs.shape[0] == 2 and np.all(np.isfinite(obs))
+        envs.step_async(np.stack([ACTIONS[0], -ACTIONS[0]]))
+        _, reward, *_ = envs.step_wait(timeout=300)
+        assert np.all(np.isfinite(reward))
+    finally:
+        envs.close(terminate=True)
+
+
 def test_a_failed_identification_truncates_the_episode(monkeypatch):
     import vlr.run
 
@@ -150,9 +283,13 @@ def test_a_failed_identification_truncates_the_episode(monkeypatch):
     try:
         obs, info = env.reset(seed=0)
         assert "no particle settled" in info["identification_failed"]
-        assert not info["is_success"] and env.observation_space.contains(obs)
-        _, _, terminated, truncated, info = env.step(ACTIONS[0])
-        assert truncated and not terminated
+        assert info["is_success"] == 0.0 and env.observation_space.contains(obs)
+        obs, reward, terminated, truncated, info = env.step(ACTIONS[0])
+        assert truncated and not terminated and info["is_success"] == 0.0
+        # Sparse: no pose was seen, so no success, though both goals are zeros.
+        u, ag, dg = env.unwrapped, obs["achieved_goal"], obs["desired_goal"]
+        assert np.array_equal(ag, dg) and reward == u.compute_reward(ag, dg, info) == -1.0
+        assert u.compute_truncated(ag, dg, info) and not u.compute_terminated(ag, dg, info)
     finally:
         env.close()
 
@@ -160,6 +297,8 @@ def test_a_failed_identification_truncates_the_episode(monkeypatch):
 def test_bad_input_is_one_line():
     with pytest.raises(TypeError, match="speed"):
         gym.make(tasks.HANDWRITING, speed=2)
+    with pytest.raises(ValueError, match="reward_type 'shaped'"):
+        gym.make(tasks.HANDWRITING, reward_type="shaped")
     with pytest.raises(ValueError, match="identify=False"):
         gym.make(tasks.CUP_STACKING, identify=False)
     env = gym.make(tasks.HANDWRITING, **FAST[tasks.HANDWRITING])

@@ -62,15 +62,15 @@ def test_the_example_policies_run_and_name_themselves_in_the_summary(tmp_path):
     (it steps from the camera's fit of those moves)."""
     out = tmp_path / "hold"
     assert main(["task", "handwriting", *TINY, "--seeds", "0", "--policy",
-                 "tasks.examples:hold", "--out", str(out)]) == 0
-    assert "policy tasks.examples:hold" in (out / "summary.md").read_text()
+                 "vlr.tasks.examples:hold", "--out", str(out)]) == 0
+    assert "policy vlr.tasks.examples:hold" in (out / "summary.md").read_text()
 
     import gymnasium as gym
+    from vlr.tasks.examples import camera_only
 
-    import tasks  # noqa: F401 - registers the environments
-    from tasks.examples import camera_only
+    from vlr import tasks
 
-    env = gym.make("vlr/Handwriting-v1", particles=200, identify_iterations=3, word="I")
+    env = gym.make(tasks.HANDWRITING, particles=200, identify_iterations=3, word="I")
     try:
         obs, _ = env.reset(seed=0)
         policy = camera_only(env.unwrapped)

@@ -13,10 +13,10 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from vlr.tasks.letters import STROKES, letter_waypoints
 
-import tasks
-from tasks.letters import STROKES, letter_waypoints
 from tests.extras import needs_hardware
+from vlr import tasks
 
 QUICK = {"particles": 1000, "identify_iterations": 1}
 # The hardware backend's example: emulated motors driving the simulated hand.
@@ -37,6 +37,7 @@ def test_letters_are_single_strokes_with_bounded_spacing():
 def test_environments_are_registered_under_one_namespace():
     for env_id in tasks.ENVIRONMENTS:
         assert env_id.startswith("vlr/") and env_id in gym.registry
+    assert len(tasks.ENVIRONMENTS) == 2 * len(tasks.DENSE) == 6   # sparse and dense per task
 
 
 def test_handwriting_episode_one_letter_seeded_regression(tmp_path):
@@ -51,6 +52,7 @@ def test_handwriting_episode_one_letter_seeded_regression(tmp_path):
                "--option", "word=I", "--out", str(out)])
     assert rc == 0
     result = json.loads((out / "result.json").read_text())
+    assert result["env"] == tasks.HANDWRITING_DENSE      # `vlr task` runs the dense id
     assert (out / "task.png").stat().st_size > 1000
     e = result["errors"]
     assert {"position_mm_mean", "position_mm_sd"} <= e.keys()
@@ -101,9 +103,9 @@ def test_task_summary_keeps_each_policy_on_its_own_rows():
     assert len(rows) == 2
     assert rows[0].startswith("| maze | 0,1 | orientation error 0.30 +- 0.10 deg"), rows
     assert rows[1].startswith("| maze, policy mine.py:make | 0 | orientation error 3.00"), rows
-    csv = summary_csv([run(0, 0.2), run(0, 3.0, "tasks.examples:hold")]).splitlines()
+    csv = summary_csv([run(0, 0.2), run(0, 3.0, "vlr.tasks.examples:hold")]).splitlines()
     assert csv[0].endswith(",policy") and csv[1].endswith(",baseline")
-    assert csv[2].endswith(",tasks.examples:hold")
+    assert csv[2].endswith(",vlr.tasks.examples:hold")
 
 
 def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
@@ -129,6 +131,8 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
            (["maze", "--set", "filter.guess_theta_deg=x"], "filter.guess_theta_deg"),
            (["cups", "--set", "filter.theta_spread_deg=0"], "filter.theta_spread_deg"),
            (["handwriting", "--option", "rolling=True"], "rolling"),
+           (["handwriting", "--option", "wrod=SCI"], "did you mean word?"),
+           (["maze", "--option", "n_run=2"], "did you mean n_runs?"),
            (["cups", "--alpha", "0"], "--alpha"),
            (["cups", "--option", "level_about=rim"], "level_about"),
            (["cups", "--alpha", "nan"], "--alpha"),
@@ -149,10 +153,10 @@ def test_task_command_rejects_bad_arguments_before_the_run(tmp_path, capsys):
              "--config", "x.yaml"], "one hand"),
            (["handwriting", "--policy", "hold"], "MODULE:NAME"),
            (["handwriting", "--policy", "no_such_module:hold"], "importing 'no_such_module'"),
-           (["handwriting", "--policy", "tasks.examples:no_such_policy"], "has no"),
-           (["handwriting", "--policy", "tasks.examples:ROWS"], "not callable"),
+           (["handwriting", "--policy", "vlr.tasks.examples:no_such_policy"], "has no"),
+           (["handwriting", "--policy", "vlr.tasks.examples:ROWS"], "not callable"),
            (["handwriting", "--policy", str(tmp_path / "missing.py") + ":make"], "no file"),
-           (["handwriting", "--policy", "tasks.examples:hold", "--alpha", "2"],
+           (["handwriting", "--policy", "vlr.tasks.examples:hold", "--alpha", "2"],
             "do not apply")]
     for argv, message in bad:
         assert main(["task", *argv, "--out", str(tmp_path / "out")]) == 2, argv
@@ -177,7 +181,8 @@ def test_a_grasp_guess_of_the_wrong_size_is_one_line(tmp_path, capsys):
 def test_the_backends_defaults_and_the_users_settings_reach_the_tasks_filter():
     """The identification in reset is the sim backend's, as `vlr identify`'s (rolling
     contacts, its likelihood with the turn term); the env's `settings` override it."""
-    from tasks.handwriting import HandwritingEnv
+    from vlr.tasks.handwriting import HandwritingEnv
+
     from vlr.settings import load_settings
 
     sim = load_settings({"world.backend": "sim"}).filter
@@ -205,7 +210,7 @@ def test_the_users_grasp_guess_centres_the_tasks_prior():
     `filter.theta_spread_deg`) reach the identification in reset, and the sim's default
     guess identifies the apple grasp where the generic guess does not (ground truth read
     after the fact, for scoring: docs/TASKS.md)."""
-    from tasks.handwriting import HandwritingEnv
+    from vlr.tasks.handwriting import HandwritingEnv
 
     errors = {}
     for guess, spread in (((-10.0, 15.0), 10.0), (None, 3.0)):
@@ -222,8 +227,8 @@ def test_the_users_grasp_guess_centres_the_tasks_prior():
             env.close()
     # every task, and a new one, identifies from the sim's guess with rolling contacts, the
     # maze's without which its filter cannot follow the holder (docs/TASKS.md)
-    from tasks.base import HandTaskEnv
-    from tasks.maze import MarbleMazeEnv
+    from vlr.tasks.base import HandTaskEnv
+    from vlr.tasks.maze import MarbleMazeEnv
 
     for env in (HandwritingEnv(), MarbleMazeEnv(), HandTaskEnv()):
         tree = env.identification_settings(0).filter
@@ -235,7 +240,7 @@ def test_the_users_grasp_guess_centres_the_tasks_prior():
 
 
 def test_a_command_band_may_give_each_tendon_its_own_limits():
-    from tasks.handwriting import HandwritingEnv
+    from vlr.tasks.handwriting import HandwritingEnv
 
     env = HandwritingEnv(command_band=((0.5e-3, 0.25e-3, 0.25e-3), 1e-3))
     release, pull = env.command_band
@@ -299,7 +304,8 @@ def test_a_hand_without_three_tendons_is_refused_in_reset(monkeypatch):
     UserError at reset, and the hand is closed again."""
     from types import SimpleNamespace
 
-    from tasks.handwriting import HandwritingEnv
+    from vlr.tasks.handwriting import HandwritingEnv
+
     from vlr.errors import UserError
 
     closed = []
@@ -309,3 +315,20 @@ def test_a_hand_without_three_tendons_is_refused_in_reset(monkeypatch):
     with pytest.raises(UserError, match="3 tendons; the backend's hand has 2 fingers"):
         env.reset(seed=0)
     assert closed == [1] and env.hand is None
+
+
+@pytest.mark.parametrize("name, option", [("handwriting", "word = 'SCIENCE'"),
+                                          ("maze", "n_runs = "), ("cups", "n_cups = ")])
+def test_task_help_lists_the_tasks_options(name, option, capsys):
+    """`vlr task NAME --help`: the command's flags, then the task's options (--option) with
+    their defaults, its own and its base's."""
+    from vlr.cli import main
+
+    with pytest.raises(SystemExit) as done:
+        main(["task", name, "--help"])
+    assert done.value.code == 0
+    out = capsys.readouterr().out
+    head, sep, tail = out.partition(f"{name}'s options")
+    assert "--option KEY=VALUE" in head and sep
+    assert option in tail and "particles = 3000" in tail
+    assert "reward_type = 'dense'" in tail      # the id's own: `vlr task` runs the dense id

@@ -96,7 +96,7 @@ def test_a_hand_that_reads_no_tensions_is_refused_by_name():
 
 
 def test_sim_trial_weighs_the_reported_tensions():
-    from sim.backend import SimHand
+    from vlr.sim.backend import SimHand
 
     with SimHand(object="apple", seed=0) as hand:
         report = hand.grasp()
@@ -113,7 +113,8 @@ def test_sim_trial_weighs_the_reported_tensions():
 
 
 def test_sim_tension_noise_is_seeded_and_only_in_the_reading():
-    from sim.backend import SimHand, SimOptions
+    from vlr.sim.backend import SimHand, SimOptions
+
     from vlr.spec import SpecError
 
     def readings(seed: int, noise: float):
@@ -133,7 +134,7 @@ def test_sim_tension_noise_is_seeded_and_only_in_the_reading():
     assert not np.allclose(readings(1, 0.5)[0] - spring, noisy - spring)
     with pytest.raises(SpecError, match="tension_noise_n = -1"):
         SimOptions(tension_noise_n=-1.0)
-    # The option is the sim's world's (`sim.backend.SimWorldOptions`), and reaches its hand.
+    # The option is the sim's world's (`vlr.sim.backend.SimWorldOptions`), and reaches its hand.
     with pytest.raises(UserError, match="unknown setting 'world.options.tension_noise_n'"):
         _settings("synthetic", world__options__tension_noise_n=0.5)
     with pytest.raises(UserError, match="world.options.tension_noise_n: 'loud'"):

@@ -10,13 +10,14 @@ import yaml
 pytest.importorskip("dynamixel_sdk", reason="the real hand's tests need the hardware extra "
                     "(pip install -e '.[hardware]')")
 
-from hardware.config import load_config  # noqa: E402
-from hardware.tension_calibration import (  # noqa: E402
+from vlr.hardware.config import load_config  # noqa: E402
+from vlr.hardware.tension_calibration import (  # noqa: E402
     CalibrationInputError,
     TensionSample,
     fit_tension,
     prompt_tensions,
 )
+
 from tests.hardware_fixtures import config_dict, write_config  # noqa: E402
 from vlr.cli import main  # noqa: E402
 
@@ -74,9 +75,10 @@ def test_calibration_on_the_simulated_hand_recovers_its_torque_constant(tmp_path
     """The sim plant's motors draw tension x spool radius / torque constant (hardware/
     sim_plant.py); the sim's own tensions as the load cell give back that constant, and the
     RMS of the fit is what the current's 2.69 mA unit costs."""
-    pytest.importorskip("sim.backend")
-    from hardware.sim_plant import TORQUE_CONSTANT
-    from hardware.tension_calibration import collect_samples
+    pytest.importorskip("vlr.sim.backend")
+    from vlr.hardware.sim_plant import TORQUE_CONSTANT
+    from vlr.hardware.tension_calibration import collect_samples
+
     from tests.hardware_fixtures import hand_on_sim_plant, sim_config_dict
 
     cfg = load_config(write_config(tmp_path, sim_config_dict()))

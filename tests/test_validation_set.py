@@ -2,8 +2,7 @@
 identification's defaults were not tuned on. Their grasps hold through a trial's actions."""
 
 import pytest
-
-from models.check_grasps import check_hold
+from vlr.models.check_grasps import check_hold
 
 VALIDATION_PAIRS = [("modelo", "tennis_ball"), ("modelo", "baseball"),
                     ("modelo", "cylinder_lying"), ("modelo", "cylinder_upright"),
@@ -13,7 +12,7 @@ VALIDATION_PAIRS = [("modelo", "tennis_ball"), ("modelo", "baseball"),
 
 @pytest.mark.parametrize("hand, obj", VALIDATION_PAIRS)
 def test_validation_grasp_holds_and_shows_its_tag(hand, obj):
-    # The full check (50 actions on seeds 0-4, `python -m models.check_grasps`) held on every
+    # The full check (50 actions on seeds 0-4, `python -m vlr.models.check_grasps`) held on every
     # seed; CI makes the first 8 actions of seed 0.
     r = check_hold(hand, obj, [0], actions=8)
     assert r.ok, r.messages
@@ -58,7 +57,7 @@ def test_validation_nh4_unknown_links():
                                          (["modelo"], "HAND:OBJECT"),
                                          (["--actions", "0", "modelo:apple"], "--actions 0")])
 def test_check_grasps_bad_input_is_one_line(argv, named, capsys):
-    from models.check_grasps import main
+    from vlr.models.check_grasps import main
 
     with pytest.raises(SystemExit) as exc:
         main(argv)

@@ -2,7 +2,8 @@
 
 Subcommands come from two places: those of the core (`vlr/`), and those that backends and
 tasks contribute through the `vlr.commands` entry-point group (see pyproject.toml). That keeps
-the dependency direction one way: `vlr` never imports `sim` or `hardware`; they plug in.
+the dependency direction one way: the core never imports `vlr.sim` or `vlr.hardware`; they
+plug in.
 """
 
 from __future__ import annotations

@@ -2,7 +2,8 @@
 
 The packages log through `logging.getLogger(__name__)`; the CLI calls `configure` once per
 run with the level of its global flags (INFO by default, `-v` DEBUG, `-q` WARNING). Lines
-read `[hardware] message`, by top-level package, with the level named from WARNING up, so
+read `[hardware] message`, by package (`vlr.hardware.bus` reads `hardware`), with the level
+named from WARNING up, so
 that the lines the real hand printed before logging existed read the same.
 """
 
@@ -15,7 +16,10 @@ __all__ = ["PACKAGES", "configure", "level_for", "progress_bar"]
 
 #: The loggers configured: the project's packages only, so that a dependency's INFO records
 #: (numba, matplotlib, ray) stay as quiet as their authors meant.
-PACKAGES = ("vlr", "sim", "hardware", "tasks")
+PACKAGES = ("vlr",)
+
+#: The folders installed under `vlr` whose records are named by their own package.
+_SUBPACKAGES = ("sim", "hardware", "tasks", "models")
 
 _handler: logging.Handler | None = None
 
@@ -45,7 +49,9 @@ class _ShortFormatter(logging.Formatter):
         self.full_names = full_names
 
     def format(self, record: logging.LogRecord) -> str:
-        name = record.name if self.full_names else record.name.split(".")[0]
+        parts = record.name.split(".")
+        short = parts[1] if len(parts) > 1 and parts[1] in _SUBPACKAGES else parts[0]
+        name = record.name if self.full_names else short
         level = f"{record.levelname}: " if record.levelno >= logging.WARNING else ""
         text = f"[{name}] {level}{record.getMessage()}"
         if record.exc_info:

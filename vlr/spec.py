@@ -35,7 +35,7 @@ from typing import Any, NoReturn
 import numpy as np
 import yaml
 
-import models
+from vlr import models
 
 __all__ = [
     "SpecError",

@@ -3,7 +3,7 @@ measures), mean and SD over the runs, the per-run values and the successes, as t
 rows of docs/TASKS.md and a CSV with one row per run.
 
 Reads only `result.json` dictionaries, so it lives in `vlr` (the CLI writes the summary of
-`vlr task --seeds`) while `python -m tasks.report DIR ...` prints the same rows for folders
+`vlr task --seeds`) while `python -m vlr.tasks.report DIR ...` prints the same rows for folders
 of earlier runs.
 """
 

@@ -20,9 +20,11 @@ returns the policy, a callable from the observation to the action (the three ten
 [m]), as `env.unwrapped.baseline()` does. An action that is not three finite numbers ends
 the run with one line naming the policy, the step and the value.
 
-The environments live in the `tasks` package, which plugs in through the `vlr.tasks`
-entry-point group (pyproject.toml), as backends do: `vlr` never imports `tasks`, `sim` or
-`hardware` itself.
+The environments live in the `vlr.tasks` package, which plugs in through the `vlr.tasks`
+entry-point group (pyproject.toml), as backends do: the core never imports `vlr.tasks`,
+`vlr.sim` or `vlr.hardware` itself. Each task's entry point names its dense id
+(`vlr/HandwritingDense-v2`, ...): the progress bar shows minus the reward, the distance to
+the target; the metrics do not depend on the reward.
 """
 
 from __future__ import annotations
@@ -46,9 +48,63 @@ def _tasks() -> dict[str, object]:
     return {ep.name: ep for ep in entry_points(group=TASK_GROUP)}
 
 
+def env_options(env_id: str) -> dict[str, object]:
+    """The environment's own arguments (`--option KEY=VALUE`) and their defaults: the
+    keyword parameters of its class's constructor and of the bases it hands **kwargs on to
+    (`inspect`; gymnasium's registry names the class), with the id's own (its spec's
+    kwargs: the dense ids' `reward_type`)."""
+    import inspect
+
+    import gymnasium as gym
+    from gymnasium.envs.registration import load_env_creator
+
+    spec = gym.spec(env_id)
+    entry = spec.entry_point
+    cls = load_env_creator(entry) if isinstance(entry, str) else entry
+    out: dict[str, object] = {}
+    for klass in getattr(cls, "__mro__", (cls,)):
+        init = klass.__dict__.get("__init__")
+        if init is None:
+            continue
+        params = inspect.signature(init).parameters.values()
+        for prm in params:
+            if prm.name not in ("self", "backend", "render_mode") and prm.kind in (
+                    prm.POSITIONAL_OR_KEYWORD, prm.KEYWORD_ONLY):
+                out.setdefault(prm.name, prm.default)
+        if not any(prm.kind == prm.VAR_KEYWORD for prm in params):
+            break
+    out.update({k: v for k, v in spec.kwargs.items() if k in out})
+    return out
+
+
+class _HelpWithOptions(argparse.Action):
+    """--help, then, with a task named before it, that task's options and their defaults
+    (built only when asked for: it imports the environments)."""
+
+    def __init__(self, option_strings, dest=argparse.SUPPRESS, default=argparse.SUPPRESS,
+                 help=None):  # noqa: A002 (argparse's name)
+        super().__init__(option_strings, dest=dest, default=default, nargs=0, help=help)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        parser.print_help()
+        name = getattr(namespace, "name", None)
+        found = _tasks()
+        if name in found:
+            env_id = found[name].load()
+            print(f"\n{name}'s options ({env_id}; --option KEY=VALUE), with their defaults:")
+            for key, value in env_options(env_id).items():
+                print(f"  {key} = {value!r}")
+        else:
+            print("\n`vlr task NAME --help` lists that task's options (--option KEY=VALUE).")
+        parser.exit()
+
+
 def register(sub: argparse._SubParsersAction) -> None:
-    p = sub.add_parser("task", help="run the VLR baseline controller on a manipulation task "
+    p = sub.add_parser("task", add_help=False,
+                       help="run the VLR baseline controller on a manipulation task "
                        "(handwriting, marble maze, cup stacking)")
+    p.add_argument("-h", "--help", action=_HelpWithOptions,
+                   help="show this help and, after a task's name, its options")
     p.add_argument("name", help="handwriting | maze | cups")
     p.add_argument("--backend", default="sim", help="sim | hardware")
     p.add_argument("--config", help="hardware backend: the hardware YAML file")
@@ -173,6 +229,16 @@ def _checked(args: argparse.Namespace) -> tuple[str, str, dict, dict, dict]:
     env_id = found[args.name].load()      # importing the tasks package registers the envs
     if env_id not in gym.registry:
         raise UserError(f"task {args.name!r} ({env_id}) is not available in this version")
+    known = env_options(env_id)
+    for key in options:
+        if key not in known:
+            import difflib
+
+            close = difflib.get_close_matches(key, known, n=3)
+            hint = (f"did you mean {' or '.join(close)}?" if close
+                    else f"one of {', '.join(sorted(known))}.")
+            raise UserError(f"--option {key!r} is not an option of {args.name}: {hint} "
+                            f"(`vlr task {args.name} --help` lists them)")
     given = {"particles": args.particles, "identify_iterations": args.identify_iterations}
     kwargs = {"backend": args.backend, **{k: v for k, v in given.items() if v is not None},
               **options}
