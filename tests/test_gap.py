@@ -104,7 +104,7 @@ def test_the_gap_defaults_to_the_sim_identifications_model_and_ramp():
     assert settings.motion == load_settings({"world.backend": "sim"}).filter.motion
     assert settings.motion.rolling and settings.motion.limit_stiffness == 17.0
     assert settings.ramp_time == SimWorldOptions.ramp_time
-    assert dict((n, mu) for n, _, _, mu in LADDER)["+ friction"] == 1.0   # sim.pads
+    assert dict((n, mu) for n, _, _, mu in LADDER)["+ friction"] == 1.0   # vlr.sim.pads
 
 
 def test_gap_cli_bad_json_folder(tmp_path, capsys):
@@ -160,7 +160,7 @@ def test_starting_from_the_sims_contact_loads():
 
 
 def test_the_model_wants_the_true_thumb_spring_from_the_true_states():
-    """`vlr gap --fit` (sim.gap_fit): the thumb's distal spring whose predicted motions cost
+    """`vlr gap --fit` (vlr.sim.gap_fit): the thumb's distal spring whose predicted motions cost
     least, from the sim's true states, with the filter's model (rolling, the sim's stops).
     Measured at 40 actions on seeds 0-4 (docs/RESULTS.md): 0.0445-0.045 against the true
     0.045, each action from the truth and open loop alike; the pinned model with weights
