@@ -2,7 +2,7 @@
 import under the `vlr/` namespace:
 
     import gymnasium as gym
-    from vlr import tasks
+    import vlr.tasks
 
     gym.register_envs(vlr.tasks)
     env = gym.make("vlr/Handwriting-v2", backend="sim")

@@ -23,7 +23,7 @@ def test_user_modules_named_like_the_folders_change_nothing(tmp_path):
         (tmp_path / f"{name}.py").write_text(f"raise ImportError('the user {name}.py')\n")
     script = textwrap.dedent("""
         import gymnasium as gym
-        from vlr import tasks
+        import vlr.tasks
         from vlr import models
         from vlr.sim.backend import SimHand
         from vlr.hardware.config import load_config
