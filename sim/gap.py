@@ -61,20 +61,20 @@ __all__ = ["LADDER", "filter_rung", "GapSettings", "record_actions", "measure_ga
 _BASE = ("springs", "tendon", "limits", "contacts")
 _ALL = _BASE + ("link_gravity", "object_gravity")
 # Model terms switched on in turn, each a setting of the one motion model (`vlr.motion.
-# MotionConfig`): (name, energy terms, rolling contacts, the pads' friction mu (inf: none)).
-# "+ friction" has the sim's pads' mu (`sim.pads`): known, like the pad's radius.
-LADDER: tuple[tuple[str, tuple[str, ...], bool, float], ...] = (
-    ("fixed contacts, no weights", _BASE, False, math.inf),
-    ("+ link weights", _BASE + ("link_gravity",), False, math.inf),
-    ("+ object weight", _ALL, False, math.inf),
-    ("+ rolling", _ALL, True, math.inf),
+# MotionConfig`): (name, energy terms, rolling contacts, the pads' friction mu (None: none)).
+# "+ friction" has the sim's pads' mu (`vlr.sim.pads`): known, like the pad's radius.
+LADDER: tuple[tuple[str, tuple[str, ...], bool, float | None], ...] = (
+    ("fixed contacts, no weights", _BASE, False, None),
+    ("+ link weights", _BASE + ("link_gravity",), False, None),
+    ("+ object weight", _ALL, False, None),
+    ("+ rolling", _ALL, True, None),
     ("+ friction", _ALL, True, SLIDE_FRICTION),
 )
 
 
 def filter_rung(motion: MotionConfig) -> str:
     """The rung that is the filter's own model: with the pads' friction or without."""
-    return "+ friction" if (motion.rolling and math.isfinite(motion.friction)) else (
+    return "+ friction" if (motion.rolling and motion.friction is not None) else (
         "+ rolling" if motion.rolling else "+ object weight")
 OBJECTS = ("apple", "wine_glass", "toy_block", "flat_screwdriver", "gelatin_box")
 STARTS = ("settle", "sim-loads")
@@ -287,9 +287,9 @@ def _turn_summary(rows: list[dict]) -> dict:
 
 
 def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
-                rolling: bool = True, friction: float = math.inf) -> dict:
+                rolling: bool = True, friction: float | None = None) -> dict:
     """Per-action, static and drift gap of the motion model with `terms`, rolling or pinned
-    contacts and the pads' friction mu `friction` (inf: none) (module docstring)."""
+    contacts and the pads' friction mu `friction` (None: none) (module docstring)."""
     model = HandModel.from_spec(rec.hand_spec)
     obj = ObjectParams.from_spec(rec.object_spec)
     # The turn's axis runs from the thumb (`vlr.observation.grasp_turn`), as the filter's

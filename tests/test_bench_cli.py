@@ -26,10 +26,11 @@ def test_bench_times_the_pinned_model_on_request(tmp_path):
                      "--json", str(out)]) == 0
         runs[contacts] = json.loads(out.read_text())
     assert runs["pinned"]["contacts"] == "pinned"
-    # The rolling model solves each action in substeps (`MotionConfig.rolling_substeps`):
-    # more Newton iterations than the pinned model's one solve (39 against 10 measured).
-    assert (runs["rolling"]["medians"]["200"]["newton_action"]
-            > 2 * runs["pinned"]["medians"]["200"]["newton_action"])
+    # One solve per action for either contact model (vlr/kernels/), from the stored tangent:
+    # at most 3 Newton steps rolling (2 measured), the pinned model no more (1 measured).
+    rolling, pinned = (runs[c]["medians"]["200"]["newton_action"] for c in ("rolling", "pinned"))
+    assert runs["rolling"]["contacts"] == "rolling"
+    assert 0 < pinned <= rolling <= 3
 
 
 def test_bench_rejects_bad_counts(tmp_path, capsys):

@@ -76,7 +76,7 @@ class MotionConfig:
             "contacts" among the terms.
         friction: the pads' Coulomb friction coefficient mu with rolling contacts: a
             contact's tangential force is at most mu times its normal force, beyond which
-            it slides. inf: the contacts roll and never slide.
+            it slides. None: the contacts roll and never slide.
         follow_substeps: a particle whose solve of an action fails by a jump or no
             convergence is solved again from its start in this many equal steps, each held
             to the jump limits: a large but continuous move is followed, a jump to another
@@ -105,7 +105,7 @@ class MotionConfig:
     terms: tuple[str, ...] = ("springs", "tendon", "limits", "link_gravity",
                               "object_gravity", "contacts")
     rolling: bool = True
-    friction: float = math.inf
+    friction: float | None = None
     follow_substeps: int = 16
     contact_stiffness: float = 1e6
     limit_stiffness: float = 100.0
@@ -131,8 +131,10 @@ class MotionConfig:
         if not (isinstance(self.follow_substeps, int) and self.follow_substeps >= 0):
             raise ValueError(f"follow_substeps {self.follow_substeps!r} must be an integer "
                              ">= 0")
-        if not (isinstance(self.friction, int | float) and self.friction > 0):
-            raise ValueError(f"friction {self.friction!r} must be > 0 (inf: no sliding)")
+        if self.friction is not None and not (isinstance(self.friction, int | float)
+                                              and math.isfinite(self.friction)
+                                              and self.friction > 0):
+            raise ValueError(f"friction {self.friction!r} must be > 0 (null: no sliding)")
         for name in ("contact_stiffness", "limit_stiffness", "tol_theta", "tol_pos",
                      "max_step_theta", "max_step_pos", "jump_theta", "jump_pos", "mu0"):
             v = getattr(self, name)
@@ -149,7 +151,9 @@ class MotionConfig:
             tol_theta=float(self.tol_theta), tol_pos=float(self.tol_pos),
             max_step_theta=float(self.max_step_theta), max_step_pos=float(self.max_step_pos),
             jump_theta=float(self.jump_theta), jump_pos=float(self.jump_pos),
-            mu0=float(self.mu0), friction=float(self.friction), max_iter=int(self.max_iter),
+            mu0=float(self.mu0),
+            friction=math.inf if self.friction is None else float(self.friction),
+            max_iter=int(self.max_iter),
             follow=int(self.follow_substeps), springs="springs" in t, tendon="tendon" in t,
             limits="limits" in t, link_gravity="link_gravity" in t,
             object_gravity="object_gravity" in t, contacts="contacts" in t,
@@ -497,7 +501,7 @@ class MotionModel:
         nan = np.full((self.model.n_fingers, rec.N_LAM), np.nan)
         vals = self._evaluate(state, q, u, th, p, R, nan)[-1]
         lam = kc * vals
-        if cfg.rolling and math.isfinite(cfg.friction):
+        if cfg.rolling and cfg.friction is not None:
             start = self._evaluate(state, q, u, state.theta[q], state.pos[q], state.rot[q],
                                    nan)[-1]
             for i in range(self.model.n_fingers):

@@ -1,6 +1,6 @@
 """`python -m vlr.precompile`: compile the particle filter's numba kernels once, at install.
 
-The kernels (`vlr/_energy_kernels.py`) are compiled with `cache=True` on their first call:
+The kernels (`vlr/kernels/`) are compiled with `cache=True` on their first call:
 30-50 s on two cores, paid by the first run after a fresh install (the first `vlr demo`
 would take about 50 s instead of about 5 s). `make install` runs this module, which calls
 every kernel on tiny identifications of the synthetic world (rolling and pinned contacts,

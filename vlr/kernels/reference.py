@@ -89,7 +89,8 @@ def _pad(m, theta, seg):
 
 def _rolling(motion, state, q, theta, pos, rot) -> float:
     m, cfg = motion.model, motion.config
-    kc, mu = cfg.contact_stiffness, cfg.friction
+    kc = cfg.contact_stiffness
+    mu = math.inf if cfg.friction is None else cfg.friction
     surf = motion.obj.surface
     rho_all = motion.contact_rho(state)
     seg = state.segments[q]
