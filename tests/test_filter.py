@@ -266,7 +266,7 @@ def test_a_particle_at_the_truth_stays_there(modelo):
     pf = ParticleFilter(modelo, OBJ, config(400))
     pf.initialize(world.observe(), u, world.nominal.theta, world.nominal.contact)
     for name in ("theta", "normals", "anchors", "pos", "rot", "segments", "stiffness",
-                 "tendon", "valid"):
+                 "tendon", "valid", "tangent"):   # the tangent: the action's predictor
         getattr(pf.state, name)[:50] = getattr(world.state, name)[0]
     u = world.apply(random_action(np.random.default_rng(1), 3))
     pf.step(u, world.observe())
