@@ -297,7 +297,7 @@ def friction(zx, zy, zz, kc, mu, lam_n, G):
     smooth in between (the Huber function's kink at the cone stalls Newton). mu = inf: the
     stick alone, 1/2 k_c |z|^2. Returns (psi, fx, fy, fz)."""
     z2 = zx * zx + zy * zy + zz * zz
-    if not math.isfinite(mu):
+    if not (math.isfinite(mu) and math.isfinite(lam_n)):
         for a in range(3):
             for b in range(3):
                 G[a, b] = kc if a == b else 0.0

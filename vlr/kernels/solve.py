@@ -81,6 +81,13 @@ def make_scratch(n_f, k_n):
                    np.empty(n_f), np.empty(n_f), np.empty(n_f), np.empty(n_f))
 
 
+# Rounds of the cone's active set after the first solve (`solve_one`).
+FRICTION_ROUNDS = 3
+# A contact pressing less than this [N] keeps stuck: the grasp's contacts never let go
+# (Eq. 8), and one held by no friction would leave the object free to spin on it.
+MIN_PRESS = 0.05
+
+
 @njit(cache=True, inline="always", _nrt=False)
 def rotate(R, w0, w1, w2, out):
     """out = R exp([w]x) (Rodrigues)."""
@@ -217,12 +224,18 @@ def _predict(th, p, R, tangent, du, cfg, sc, n_f, k_n):
 
 @njit(cache=True, _nrt=False)
 def _hold_friction(cfg, sc, n_f):
-    """The pads' friction limit held at the predicted normal force (CTX_CAP), the tangential
-    multipliers projected into the cone."""
+    """The pads' friction limit (CTX_CAP) for the solve: a contact whose predicted
+    tangential force is inside its cone starts stuck (no limit, inf); one outside it slides
+    with the limit held at its predicted normal force, the tangential multiplier projected
+    into the cone."""
     for i in range(n_f):
         lam_n = max(0.0, -sc.lam[i, LAM_N])
-        sc.ctx[i, CTX_CAP] = lam_n
-        if math.isfinite(cfg.friction):
+        lt = math.sqrt(sc.lam[i, LAM_T] ** 2 + sc.lam[i, LAM_T + 1] ** 2
+                       + sc.lam[i, LAM_T + 2] ** 2)
+        if not math.isfinite(cfg.friction) or lt <= cfg.friction * lam_n or lam_n < MIN_PRESS:
+            sc.ctx[i, CTX_CAP] = math.inf
+        else:
+            sc.ctx[i, CTX_CAP] = lam_n
             _friction_force(sc.lam, i, cfg.kc, cfg.friction, lam_n, sc.KO)
 
 
@@ -467,21 +480,33 @@ def solve_one(q, ps, hand, srf, cfg, u0, u1, predict, max_iter, sc):
         _hold_friction(cfg, sc, n_f)
     ok, evals = newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u1, hand, cfg, sc,
                        max_iter, prev)
-    if ok and rolling_friction and math.isfinite(cfg.friction):
-        # A sliding contact's limit was held at the predicted normal force: if the force
-        # ended far from it, solve once more from here with the limit where it ended.
-        again = False
-        for i in range(n_f):
-            held = sc.ctx[i, CTX_CAP]
-            lam_n = max(0.0, -sc.lam[i, LAM_N])
-            lt = math.sqrt(sc.lam[i, LAM_T] ** 2 + sc.lam[i, LAM_T + 1] ** 2
-                           + sc.lam[i, LAM_T + 2] ** 2)
-            if (lt > 0.7 * cfg.friction * held  # sliding
-                    and abs(lam_n - held) > 0.02 * held + 0.01):
-                again = True
-        if again:
+    if rolling_friction and math.isfinite(cfg.friction):
+        # Active set of the cone: a stuck contact whose force left its cone slides from
+        # here, with the limit at its normal force; a sliding one whose normal force
+        # ended far from the limit held is solved again with the limit where it ended.
+        for _round in range(FRICTION_ROUNDS):
+            if not ok:
+                break
+            again = False
             for i in range(n_f):
-                sc.ctx[i, CTX_CAP] = max(0.0, -sc.lam[i, LAM_N])
+                held = sc.ctx[i, CTX_CAP]
+                lam_n = max(0.0, -sc.lam[i, LAM_N])
+                lt = math.sqrt(sc.lam[i, LAM_T] ** 2 + sc.lam[i, LAM_T + 1] ** 2
+                               + sc.lam[i, LAM_T + 2] ** 2)
+                if not math.isfinite(held):
+                    if lam_n >= MIN_PRESS and lt > cfg.friction * lam_n * (1.0 + 1e-3) + 1e-3:
+                        again = True
+                        sc.ctx[i, CTX_CAP] = lam_n
+                elif (lt > 0.7 * cfg.friction * held
+                      and abs(lam_n - held) > 0.02 * held + 0.01):
+                    again = True
+                    sc.ctx[i, CTX_CAP] = lam_n
+            if not again:
+                break
+            for i in range(n_f):
+                if math.isfinite(sc.ctx[i, CTX_CAP]):
+                    _friction_force(sc.lam, i, cfg.kc, cfg.friction, sc.ctx[i, CTX_CAP],
+                                    sc.KO)
             ok, more = newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u1, hand, cfg,
                               sc, max_iter, math.inf)
             evals += more
@@ -516,7 +541,7 @@ def _carried_stretch(sc, i, cfg):
     kc = cfg.kc
     lx, ly, lz = sc.lam[i, LAM_T], sc.lam[i, LAM_T + 1], sc.lam[i, LAM_T + 2]
     f = 1.0 / kc
-    if math.isfinite(cfg.friction):
+    if math.isfinite(cfg.friction) and math.isfinite(sc.ctx[i, CTX_CAP]):
         cap = cfg.friction * sc.ctx[i, CTX_CAP]
         if cap > 1e-9:
             eps = max(cap / kc, STICK_ZONE)
