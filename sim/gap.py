@@ -40,7 +40,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from vlr.sim.gap_fit import profile_unknown
-from vlr.sim.pads import SLIDE_FRICTION
+from vlr.sim.pads import SLIDE_FRICTION, TORSION_FRICTION
 
 from vlr.errors import UserError
 from vlr.explore import ActionStream
@@ -295,10 +295,12 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
     # The turn's axis runs from the thumb (`vlr.observation.grasp_turn`), as the filter's
     # turn term does; a hand without one has no turn split (NaN), not another finger's.
     thumb = model.finger_index("thumb") if "thumb" in model.names else None
-    cfg = replace(settings.motion, terms=terms, rolling=rolling, friction=friction)
+    cfg = replace(settings.motion, terms=terms, rolling=rolling, friction=friction,
+                  spin_friction=TORSION_FRICTION if friction is not None else 0.0)
     motion = MotionModel(model, obj, cfg)
     # The static settle may travel further than an action may (the model's own equilibrium).
-    settle = replace(cfg, jump_theta=1.0, jump_pos=0.05, max_iter=200)
+    settle = replace(cfg, jump_theta=1.0, jump_pos=0.05, max_iter=200, friction=None,
+                     spin_friction=0.0)
     rows, static = [], []
     for k in range(len(rec.commands) - 1):
         t0, t1 = rec.truths[k], rec.truths[k + 1]

@@ -106,6 +106,7 @@ class MotionConfig:
                               "object_gravity", "contacts")
     rolling: bool = True
     friction: float | None = None
+    spin_friction: float = 0.0
     follow_substeps: int = 16
     contact_stiffness: float = 1e6
     limit_stiffness: float = 100.0
@@ -135,6 +136,9 @@ class MotionConfig:
                                               and math.isfinite(self.friction)
                                               and self.friction > 0):
             raise ValueError(f"friction {self.friction!r} must be > 0 (null: no sliding)")
+        if not (isinstance(self.spin_friction, int | float)
+                and math.isfinite(self.spin_friction) and self.spin_friction >= 0):
+            raise ValueError(f"spin_friction {self.spin_friction!r} m must be >= 0")
         for name in ("contact_stiffness", "limit_stiffness", "tol_theta", "tol_pos",
                      "max_step_theta", "max_step_pos", "jump_theta", "jump_pos", "mu0"):
             v = getattr(self, name)
@@ -153,6 +157,7 @@ class MotionConfig:
             jump_theta=float(self.jump_theta), jump_pos=float(self.jump_pos),
             mu0=float(self.mu0),
             friction=math.inf if self.friction is None else float(self.friction),
+            spin=float(self.spin_friction) if self.rolling else 0.0,
             max_iter=int(self.max_iter),
             follow=int(self.follow_substeps), springs="springs" in t, tendon="tendon" in t,
             limits="limits" in t, link_gravity="link_gravity" in t,

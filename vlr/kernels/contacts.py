@@ -56,6 +56,7 @@ from vlr.kernels.records import (
     CTX_O,
     CTX_PHI0,
     CTX_RHO,
+    CTX_SPIN,
     CTX_T0,
     LAM_N,
     LAM_T,
@@ -186,6 +187,7 @@ def start_context(th, seg, nrm, anc, p, R, rho, hand, srf, cfg, i, chain, ctx, l
     for b in range(3):
         ctx[i, CTX_T0 + b] = R[0, b] * tx + R[1, b] * ty + R[2, b] * tz
     ctx[i, CTX_CAP] = math.inf
+    ctx[i, CTX_SPIN] = 0.0
     lam[i, LAM_N] = cfg.kc * g
     for b in range(3):
         lam[i, LAM_T + b] = cfg.kc * (R[b, 0] * ctx[i, CTX_T0] + R[b, 1] * ctx[i, CTX_T0 + 1]
@@ -572,6 +574,84 @@ def rolling(th, seg, p, R, R0, hand, cfg, i, chain, ctx, lam, vals, jac, gA, gC,
     for j in range(k_n):
         for k in range(k_n):
             A[i, j, k] += hqq
+    return e
+
+
+# The spin [rad] over which the torsional friction's |psi| is rounded off (Newton needs a
+# smooth energy): the stick's stiffness is the limit over it.
+SPIN_EPS = 1e-3
+
+
+@njit(cache=True, inline="always", _nrt=False)
+def spin(th, R, R0, hand, i, ctx, gA, gC, A, B, C):
+    """Pad i's torsional friction over the solve (the pads' spin, rate-independent Coulomb
+    friction as an incremental dissipation potential): mu_t lambda_n (sqrt(psi^2 + eps^2)
+    - eps), psi the object's turn relative to the pad about the start's normal n0,
+
+        psi = n0 . vee_asym(R R0^T) - (n0 . om) (phi - phi0),
+
+    vee_asym(M) = vee(M - M^T) / 2 (sin(angle) axis: within angle^3 / 6 of the turn),
+    om the finger's joint axis in the palm; its limit mu_t lambda_n (ctx's CTX_SPIN) held
+    at the solve's predicted normal force. Adds its gradient and exact Hessian into the
+    arrow blocks; returns its energy."""
+    cap = ctx[i, CTX_SPIN]
+    k_n = th.shape[1]
+    n0x, n0y, n0z = ctx[i, CTX_N0], ctx[i, CTX_N0 + 1], ctx[i, CTX_N0 + 2]
+    rb = hand.base_rot
+    cw = -(n0x * rb[i, 0, 0] + n0y * rb[i, 1, 0] + n0z * rb[i, 2, 0])  # n0 . om
+    phi = 0.0
+    for k in range(k_n):
+        phi += th[i, k]
+    # X = R0^T [n0]x R; psi_O = -tr(X) / 2
+    nx = ((0.0, -n0z, n0y), (n0z, 0.0, -n0x), (-n0y, n0x, 0.0))
+    x00 = x01 = x02 = x10 = x11 = x12 = x20 = x21 = x22 = 0.0
+    for a in range(3):
+        for b in range(3):
+            v = 0.0
+            for c in range(3):
+                w = R0[0, a] * nx[0][c] + R0[1, a] * nx[1][c] + R0[2, a] * nx[2][c]
+                v += w * R[c, b]
+            if a == 0:
+                if b == 0:
+                    x00 = v
+                elif b == 1:
+                    x01 = v
+                else:
+                    x02 = v
+            elif a == 1:
+                if b == 0:
+                    x10 = v
+                elif b == 1:
+                    x11 = v
+                else:
+                    x12 = v
+            else:
+                if b == 0:
+                    x20 = v
+                elif b == 1:
+                    x21 = v
+                else:
+                    x22 = v
+    X = ((x00, x01, x02), (x10, x11, x12), (x20, x21, x22))
+    tr = x00 + x11 + x22
+    psi = -0.5 * tr - cw * (phi - ctx[i, CTX_PHI0])
+    rr = math.sqrt(psi * psi + SPIN_EPS * SPIN_EPS)
+    e = cap * (rr - SPIN_EPS)
+    f1 = cap * psi / rr
+    f2 = cap * SPIN_EPS * SPIN_EPS / (rr * rr * rr)
+    # d psi / d w (the body turn R exp([w]x)): vee(X - X^T) / 2
+    gw = (0.5 * (x21 - x12), 0.5 * (x02 - x20), 0.5 * (x10 - x01))
+    for k in range(k_n):
+        gA[i, k] -= f1 * cw
+        for m in range(k_n):
+            A[i, k, m] += f2 * cw * cw
+        for b in range(3):
+            B[i, k, 3 + b] -= f2 * cw * gw[b]
+    for a in range(3):
+        gC[3 + a] += f1 * gw[a]
+        for b in range(3):
+            h = -0.5 * (0.5 * (X[a][b] + X[b][a]) - (tr if a == b else 0.0))
+            C[3 + a, 3 + b] += f2 * gw[a] * gw[b] + f1 * h
     return e
 
 

@@ -33,7 +33,7 @@ Surface = namedtuple("Surface", "kind radius axis flat_radius")
 
 # The solver's settings (`vlr.motion.MotionConfig`), numbers only.
 Settings = namedtuple("Settings", "kc klim tol_theta tol_pos max_step_theta max_step_pos "
-                                  "jump_theta jump_pos mu0 friction max_iter follow "
+                                  "jump_theta jump_pos mu0 friction spin max_iter follow "
                                   "springs tendon limits link_gravity object_gravity "
                                   "contacts rolling")
 
@@ -48,10 +48,11 @@ OK, NONFINITE, NO_CONVERGENCE, JUMP, INACTIVE = 0, 1, 2, 3, 4
 # O (3), and on the pad, c_D0 in D (3); the finger's summed angle phi0; the contact normal
 # at x0 in the palm frame n0 (3), whose tangent plane the slip is measured in; the
 # tangential stretch at x0 in O, t0 (3), carried by the object's turn; the normal force
-# the friction's limit is held at, lambda_n (inf: none).
+# the friction's limit is held at, lambda_n (inf: none); the pad's torsional friction's
+# limit mu_t lambda_n [N m] (0: none).
 (CTX_KIND, CTX_O, CTX_DIR, CTX_RHO, CTX_CO0, CTX_CD0, CTX_PHI0, CTX_N0, CTX_T0,
- CTX_CAP) = (0, 1, 4, 7, 8, 11, 14, 15, 18, 21)
-N_CTX = 22
+ CTX_CAP, CTX_SPIN) = (0, 1, 4, 7, 8, 11, 14, 15, 18, 21, 22)
+N_CTX = 23
 
 # The multipliers of one contact (N, N_LAM): the gap's force sigma = k_c g (negative when
 # the pad presses) and the tangential force (3, palm).

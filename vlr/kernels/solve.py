@@ -41,9 +41,18 @@ from numba import njit, prange
 
 from vlr.kernels.arrow import factor, solve
 from vlr.kernels.chain import distal_point, finger_chain, hand_terms, object_gravity, to_palm
-from vlr.kernels.contacts import STICK_ZONE, friction, pinned, rolled, rolling, start_context
+from vlr.kernels.contacts import (
+    STICK_ZONE,
+    friction,
+    pinned,
+    rolled,
+    rolling,
+    spin,
+    start_context,
+)
 from vlr.kernels.records import (
     CTX_CAP,
+    CTX_SPIN,
     INACTIVE,
     JUMP,
     LAM_N,
@@ -135,6 +144,8 @@ def evaluate(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc):
             if cfg.rolling:
                 e += rolling(th, seg, p, R, sc.R0, hand, cfg, i, chain, sc.ctx, sc.lam,
                              sc.vals, sc.jac, sc.gA, sc.gC, sc.A, sc.B, sc.C, w)
+                if cfg.spin > 0.0:
+                    e += spin(th, R, sc.R0, hand, i, sc.ctx, sc.gA, sc.gC, sc.A, sc.B, sc.C)
             else:
                 e += pinned(th, seg, nrm, anc, p, R, hand, cfg, i, chain, sc.lam, sc.vals,
                             sc.jac, sc.gA, sc.gC, sc.A, sc.B, sc.C, sc.jk)
@@ -230,6 +241,7 @@ def _hold_friction(cfg, sc, n_f):
     into the cone."""
     for i in range(n_f):
         lam_n = max(0.0, -sc.lam[i, LAM_N])
+        sc.ctx[i, CTX_SPIN] = cfg.spin * lam_n
         lt = math.sqrt(sc.lam[i, LAM_T] ** 2 + sc.lam[i, LAM_T + 1] ** 2
                        + sc.lam[i, LAM_T + 2] ** 2)
         if not math.isfinite(cfg.friction) or lt <= cfg.friction * lam_n or lam_n < MIN_PRESS:
