@@ -112,6 +112,20 @@ def test_rolling_gradient_and_hessian_match_reference(modelo, surface):
 
 
 @pytest.mark.parametrize("surface", SURFACES[:2])
+def test_spin_friction_gradient_and_hessian_match_reference(modelo, surface):
+    """The pads' torsional friction (the spin about the start's normal, its limit held at
+    the start's normal force), turned far out of its stick zone: the kernel against the
+    reference; spinning costs energy."""
+    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=surface)
+    _, st, u0 = grasp(modelo, config=ROLL)
+    mm = MotionModel(modelo, obj, replace(ROLL, spin_friction=0.001))
+    x = shaken(st, 5, 0.03, 0.05, 5e-4)
+    e = check_derivatives(mm, st, u0, x, hess_atol=2e-6)
+    free = MotionModel(modelo, obj, ROLL)
+    assert e > free.evaluate(st, 0, u0, *x)[0] + 1e-4
+
+
+@pytest.mark.parametrize("surface", SURFACES[:2])
 def test_friction_gradient_and_hessian_match_reference(modelo, surface):
     """The pads' friction (the smoothed maximum dissipation, the normal force held at the
     start's): sliding contacts far out of their stick zone, the kernel against the

@@ -149,7 +149,6 @@ REMOVED = [
     ("sim", "filter.motion.link_scaling", "true", None),
     ("sim", "filter.motion.exact_cylinder", "true", None),
     ("sim", "filter.motion.slide_friction", "1.0", None),
-    ("sim", "filter.motion.spin_friction", "0.001", None),
     ("sim", "filter.motion.spin_stiffness", "0.1", None),
     ("sim", "filter.motion.spin_smoothing", "0.1", None),
     ("sim", "filter.motion.with_rolling", "true", None),

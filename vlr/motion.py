@@ -77,6 +77,10 @@ class MotionConfig:
         friction: the pads' Coulomb friction coefficient mu with rolling contacts: a
             contact's tangential force is at most mu times its normal force, beyond which
             it slides. None: the contacts roll and never slide.
+        spin_friction: the pads' torsional friction coefficient mu_t [m] with rolling
+            contacts: a pad sticks about its contact normal until the torque reaches mu_t
+            times its normal force, then spins (`vlr.kernels.contacts.spin`); over an
+            action only, its limit held at the predicted normal force. 0: pads spin freely.
         follow_substeps: a particle whose solve of an action fails by a jump or no
             convergence is solved again from its start in this many equal steps, each held
             to the jump limits: a large but continuous move is followed, a jump to another

@@ -8,7 +8,7 @@ import math
 
 import numpy as np
 
-from vlr.kernels.contacts import STICK_ZONE
+from vlr.kernels.contacts import SPIN_EPS, STICK_ZONE
 from vlr.kinematics import contact_points, plane_rotation
 from vlr.surface import FLAT_CURVATURE
 
@@ -138,5 +138,14 @@ def _rolling(motion, state, q, theta, pos, rot) -> float:
         z = rot @ t0 + s
         z = z - (z @ n0) * n0
         e += 0.5 * kc * gap * gap + _friction(z, kc, mu, lam_n)
+        if cfg.spin_friction > 0:
+            # the pad's spin about n0: the object's turn less the distal link's
+            turn = rot @ r0.T
+            vee = 0.5 * np.array([turn[2, 1] - turn[1, 2], turn[0, 2] - turn[2, 0],
+                                  turn[1, 0] - turn[0, 1]])
+            om = -m.base_rot[i][:, 0]
+            psi = n0 @ vee - (n0 @ om) * (theta[i].sum() - th0[i].sum())
+            cap = cfg.spin_friction * lam_n
+            e += cap * (math.sqrt(psi * psi + SPIN_EPS * SPIN_EPS) - SPIN_EPS)
     return e
 
