@@ -579,7 +579,7 @@ def rolling(th, seg, p, R, R0, hand, cfg, i, chain, ctx, lam, vals, jac, gA, gC,
 
 # The spin [rad] over which the torsional friction's |psi| is rounded off (Newton needs a
 # smooth energy): the stick's stiffness is the limit over it.
-SPIN_EPS = 1e-3
+SPIN_EPS = 5e-3
 
 
 @njit(cache=True, inline="always", _nrt=False)
