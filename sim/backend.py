@@ -421,6 +421,7 @@ class SimWorldOptions:
 
 def _backend():
     from vlr.backends import Backend
+    from vlr.sim.pads import TORSION_FRICTION
 
     # What each default measured, and against what: docs/DECISIONS.md. Rolling contacts and
     # the surface contact prior are the dataclasses' own defaults (the real hand's too).
@@ -430,6 +431,7 @@ def _backend():
                   "filter.observation.sigma_rot_deg": 0.4,
                   "filter.observation.sigma_turn_deg": 1.0,
                   "filter.motion.limit_stiffness": 17.0,
+                  "filter.motion.spin_friction": TORSION_FRICTION,
                   "filter.guess_theta_deg": [-10.0, 15.0],
                   "filter.theta_spread_deg": 10.0})
 

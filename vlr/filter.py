@@ -390,14 +390,16 @@ class GraspFilter:
         self.history: list[IterationRecord] = []
         self.iteration = 0
         self.command: np.ndarray | None = None
+        # A settle has no history: the pads' spin, an action's, does not hold it.
         self._project_cfg = replace(self.config.motion, jump_theta=self.config.init_jump_theta,
-                                    jump_pos=0.05)
+                                    jump_pos=0.05, spin_friction=0.0)
         self.project_status = np.zeros(5, dtype=np.int64)
         self.newton_iterations: dict[str, float] = {}
         self.recoveries = 0  # times every hypothesis failed and the prior was drawn again
         self.prior_redraws = 0  # prior draws of which no particle settled (`initialize`)
         self._init_cfg = replace(self.config.motion, jump_theta=self.config.init_jump_theta,
-                                 jump_pos=0.05, max_iter=max(self.config.motion.max_iter, 100))
+                                 jump_pos=0.05, max_iter=max(self.config.motion.max_iter, 100),
+                                 spin_friction=0.0)
         # Seconds per phase of the last iteration (motion, observation, weights, resampling,
         # jitter, summary) and what its solves took, for `vlr bench`.
         self.timings: dict[str, float] = {}
