@@ -420,8 +420,9 @@ class SimWorldOptions:
 
 
 def _backend():
-    from vlr.backends import Backend
     from vlr.sim.pads import TORSION_FRICTION
+
+    from vlr.backends import Backend
 
     # What each default measured, and against what: docs/DECISIONS.md. Rolling contacts and
     # the surface contact prior are the dataclasses' own defaults (the real hand's too).

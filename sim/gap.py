@@ -61,21 +61,28 @@ __all__ = ["LADDER", "filter_rung", "GapSettings", "record_actions", "measure_ga
 _BASE = ("springs", "tendon", "limits", "contacts")
 _ALL = _BASE + ("link_gravity", "object_gravity")
 # Model terms switched on in turn, each a setting of the one motion model (`vlr.motion.
-# MotionConfig`): (name, energy terms, rolling contacts, the pads' friction mu (None: none)).
-# "+ friction" has the sim's pads' mu (`vlr.sim.pads`): known, like the pad's radius.
-LADDER: tuple[tuple[str, tuple[str, ...], bool, float | None], ...] = (
-    ("fixed contacts, no weights", _BASE, False, None),
-    ("+ link weights", _BASE + ("link_gravity",), False, None),
-    ("+ object weight", _ALL, False, None),
-    ("+ rolling", _ALL, True, None),
-    ("+ friction", _ALL, True, SLIDE_FRICTION),
+# MotionConfig`): (name, energy terms, rolling contacts, the pads' sliding friction mu (None:
+# none), their torsional friction mu_t [m]). The pads' coefficients are the sim's
+# (`vlr.sim.pads`): known, like the pad's radius.
+LADDER: tuple[tuple[str, tuple[str, ...], bool, float | None, float], ...] = (
+    ("fixed contacts, no weights", _BASE, False, None, 0.0),
+    ("+ link weights", _BASE + ("link_gravity",), False, None, 0.0),
+    ("+ object weight", _ALL, False, None, 0.0),
+    ("+ rolling", _ALL, True, None, 0.0),
+    ("+ pad spin", _ALL, True, None, TORSION_FRICTION),
+    ("+ sliding", _ALL, True, SLIDE_FRICTION, TORSION_FRICTION),
 )
 
 
 def filter_rung(motion: MotionConfig) -> str:
-    """The rung that is the filter's own model: with the pads' friction or without."""
-    return "+ friction" if (motion.rolling and motion.friction is not None) else (
-        "+ rolling" if motion.rolling else "+ object weight")
+    """The rung that is the filter's own model: its contacts and the pads' friction."""
+    if not motion.rolling:
+        return "+ object weight"
+    if motion.friction is not None:
+        return "+ sliding"
+    return "+ pad spin" if motion.spin_friction > 0 else "+ rolling"
+
+
 OBJECTS = ("apple", "wine_glass", "toy_block", "flat_screwdriver", "gelatin_box")
 STARTS = ("settle", "sim-loads")
 
@@ -287,16 +294,19 @@ def _turn_summary(rows: list[dict]) -> dict:
 
 
 def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
-                rolling: bool = True, friction: float | None = None) -> dict:
+                rolling: bool = True, friction: float | None = None,
+                spin_friction: float = 0.0) -> dict:
     """Per-action, static and drift gap of the motion model with `terms`, rolling or pinned
-    contacts and the pads' friction mu `friction` (None: none) (module docstring)."""
+    contacts, the pads' sliding friction mu `friction` (None: none) and torsional friction
+    mu_t `spin_friction` [m] (module docstring). The settles are frictionless, as the
+    filter's are: the pads' friction acts over an action."""
     model = HandModel.from_spec(rec.hand_spec)
     obj = ObjectParams.from_spec(rec.object_spec)
     # The turn's axis runs from the thumb (`vlr.observation.grasp_turn`), as the filter's
     # turn term does; a hand without one has no turn split (NaN), not another finger's.
     thumb = model.finger_index("thumb") if "thumb" in model.names else None
     cfg = replace(settings.motion, terms=terms, rolling=rolling, friction=friction,
-                  spin_friction=TORSION_FRICTION if friction is not None else 0.0)
+                  spin_friction=spin_friction)
     motion = MotionModel(model, obj, cfg)
     # The static settle may travel further than an action may (the model's own equilibrium).
     settle = replace(cfg, jump_theta=1.0, jump_pos=0.05, max_iter=200, friction=None,
@@ -413,8 +423,8 @@ def gap_report(settings: GapSettings, ladder: tuple = LADDER) -> dict:
     if len(rec.commands) < 2:
         raise UserError(f"{settings.object}: the grasp was lost at the first action; "
                         "nothing to measure")
-    configs = [{"name": name, **measure_gap(rec, terms, settings, rolling, friction)}
-               for name, terms, rolling, friction in ladder]
+    configs = [{"name": name, **measure_gap(rec, terms, settings, rolling, friction, spin)}
+               for name, terms, rolling, friction, spin in ladder]
     full = next((c for c in configs if c["name"] == filter_rung(settings.motion)),
                 configs[-1])
     true_p = [np.linalg.norm(b.position - a.position) * 1e3
