@@ -55,7 +55,7 @@ from vlr.camera import (
     pose_to_matrix,
 )
 from vlr.errors import UserError
-from vlr.io import atomic_path, read_line
+from vlr.io import atomic_path, check_output_dir, check_output_file, read_line
 from vlr.perception import detect_tags, observe, to_gray
 
 __all__ = ["BoardSpec", "BoardView", "Coverage", "IntrinsicsFit", "board_image", "calibrate",
@@ -498,6 +498,9 @@ def _check_args(args: argparse.Namespace) -> np.ndarray | None:
         raise UserError("give --out FILE.yaml, the calibration to write")
     if args.out.is_dir():
         raise UserError(f"--out {args.out} is a folder: give the YAML file to write")
+    check_output_file(args.out, "--out")   # before the views, not after them
+    if args.save_views is not None:
+        check_output_dir(args.save_views, "--save-views")
     if (args.width is None) != (args.height is None):
         raise UserError(f"--width {args.width} --height {args.height}: give both or neither")
     if args.min_views < 3:

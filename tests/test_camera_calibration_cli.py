@@ -311,6 +311,7 @@ def test_sim_is_seeded_and_its_views_calibrate_the_same_from_a_folder(rendered, 
     (["--width", "320", "--height", "240"], "--width 320 --height 240: --sim renders"),
     (["--tag-size", "-1"], "--tag-size -1.0: must be a length > 0"),
     (["--seed", "-1"], "--seed -1: must be 0 or more"),
+    (["--save-views", "/proc/views"], "--save-views /proc/views: cannot write there"),
 ])
 def test_sim_bad_input_is_one_line_and_no_file(extra, named, tmp_path, capsys) -> None:
     out = tmp_path / "camera.yaml"
