@@ -282,9 +282,10 @@ def _object_point_curvature(k_n, l0, l1, l2, c0, c1, c2, C):
 
 
 # The friction's stick zone at least [m]: Newton crosses a stick zone of k_c's few
-# micrometres only by tiny steps; a tenth of the likelihood's scale (0.2 mm) is invisible to
-# the filter.
-STICK_ZONE = 2e-5
+# micrometres only by tiny steps. Half the likelihood's scale (0.2 mm): against 20 um, `vlr
+# gap`'s sliding rung took half the Newton steps with the same per-action gap
+# (docs/DECISIONS.md).
+STICK_ZONE = 1e-4
 CYL_EXACT = True
 
 
