@@ -115,9 +115,10 @@ def test_rolling_gradient_and_hessian_match_reference(modelo, surface):
 def test_spin_friction_gradient_and_hessian_match_reference(modelo, surface):
     """The pads' torsional friction (the spin about the start's normal, its limit held at
     the start's normal force), turned far out of its stick zone: the kernel against the
-    reference; spinning costs energy."""
+    reference, each pad carrying a spin from a last action; spinning costs energy."""
     obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=surface)
     _, st, u0 = grasp(modelo, config=ROLL)
+    st.spin = np.array([[0.004, -0.006, 0.002]])
     mm = MotionModel(modelo, obj, replace(ROLL, spin_friction=0.001))
     x = shaken(st, 5, 0.03, 0.05, 5e-4)
     e = check_derivatives(mm, st, u0, x, hess_atol=2e-6)

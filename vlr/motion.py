@@ -209,6 +209,8 @@ class ParticleState:
             model's `LocalSurface` (`vlr.surface.contact_radii`).
         tangent: (P, rows, N) each particle's equilibrium derivative by the commands, the
             next action's first guess (`vlr.kernels.records.tangent_rows`); None: none yet.
+        spin: (P, N) each pad's spin carried from its last action [rad], the torsional
+            friction's stick (`MotionConfig.spin_friction`); None: none yet.
     """
 
     theta: np.ndarray
@@ -224,6 +226,7 @@ class ParticleState:
     object_com: np.ndarray | None = None
     surface_curvature: np.ndarray | None = None
     tangent: np.ndarray | None = None
+    spin: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -239,11 +242,12 @@ class ParticleState:
         """Write the particles of `other` into the places `idx` of this state (in place)."""
         for f in fields(self):
             mine, theirs = getattr(self, f.name), getattr(other, f.name)
-            if f.name == "tangent" and (mine is None) != (theirs is None):
+            if f.name in ("tangent", "spin") and (mine is None) != (theirs is None):
                 if theirs is None:
                     mine[idx] = 0.0
                     continue
-                self.tangent = mine = np.zeros((self.n,) + theirs.shape[1:])
+                mine = np.zeros((self.n,) + theirs.shape[1:])
+                setattr(self, f.name, mine)
             elif (mine is None) != (theirs is None):
                 raise ValueError(f"put: {f.name} is per particle in one state, not the other")
             if mine is not None:
@@ -409,7 +413,7 @@ class MotionModel:
 
     def particles(self, state: ParticleState) -> rec.Particles:
         """The kernels' record of `state` (its arrays, not copies: solves write into it);
-        a state without a tangent gets one of zeros."""
+        a state without a tangent or a carried spin gets one of zeros."""
         mass, com = self.object_arrays(state)
         rho = self.contact_rho(state)
         if rho is None:
@@ -417,11 +421,13 @@ class MotionModel:
         if state.tangent is None or state.tangent.shape[0] != state.n:
             state.tangent = rec.empty_tangent(state.n, self.model.n_fingers,
                                               self.model.n_joints)
+        if state.spin is None or state.spin.shape[0] != state.n:
+            state.spin = np.zeros((state.n, self.model.n_fingers))
         return rec.Particles(theta=state.theta, seg=state.segments, nrm=state.normals,
                              anc=state.anchors, pos=state.pos, rot=state.rot,
                              stiff=state.stiffness, kt=state.tendon, mass=mass, com=com,
                              rho=np.ascontiguousarray(rho, dtype=float),
-                             tangent=state.tangent, valid=state.valid)
+                             tangent=state.tangent, spin=state.spin, valid=state.valid)
 
     def solve(self, state: ParticleState, u: np.ndarray, config: MotionConfig | None = None,
               u_from: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:

@@ -55,6 +55,7 @@ from vlr.kernels.records import (
     CTX_N0,
     CTX_O,
     CTX_PHI0,
+    CTX_PSI0,
     CTX_RHO,
     CTX_SPIN,
     CTX_T0,
@@ -188,6 +189,7 @@ def start_context(th, seg, nrm, anc, p, R, rho, hand, srf, cfg, i, chain, ctx, l
         ctx[i, CTX_T0 + b] = R[0, b] * tx + R[1, b] * ty + R[2, b] * tz
     ctx[i, CTX_CAP] = math.inf
     ctx[i, CTX_SPIN] = 0.0
+    ctx[i, CTX_PSI0] = 0.0
     lam[i, LAM_N] = cfg.kc * g
     for b in range(3):
         lam[i, LAM_T + b] = cfg.kc * (R[b, 0] * ctx[i, CTX_T0] + R[b, 1] * ctx[i, CTX_T0 + 1]
@@ -589,12 +591,13 @@ def spin(th, R, R0, hand, i, ctx, gA, gC, A, B, C):
     friction as an incremental dissipation potential): mu_t lambda_n (sqrt(psi^2 + eps^2)
     - eps), psi the object's turn relative to the pad about the start's normal n0,
 
-        psi = n0 . vee_asym(R R0^T) - (n0 . om) (phi - phi0),
+        psi = psi0 + n0 . vee_asym(R R0^T) - (n0 . om) (phi - phi0),
 
     vee_asym(M) = vee(M - M^T) / 2 (sin(angle) axis: within angle^3 / 6 of the turn),
-    om the finger's joint axis in the palm; its limit mu_t lambda_n (ctx's CTX_SPIN) held
-    at the solve's predicted normal force. Adds its gradient and exact Hessian into the
-    arrow blocks; returns its energy."""
+    om the finger's joint axis in the palm, psi0 the spin the pad carries from its last
+    action (ctx's CTX_PSI0: the stick's, `carried_spin`); its limit mu_t lambda_n (ctx's
+    CTX_SPIN) held at the solve's predicted normal force. Adds its gradient and exact
+    Hessian into the arrow blocks; returns its energy."""
     cap = ctx[i, CTX_SPIN]
     k_n = th.shape[1]
     n0x, n0y, n0z = ctx[i, CTX_N0], ctx[i, CTX_N0 + 1], ctx[i, CTX_N0 + 2]
@@ -635,7 +638,7 @@ def spin(th, R, R0, hand, i, ctx, gA, gC, A, B, C):
                     x22 = v
     X = ((x00, x01, x02), (x10, x11, x12), (x20, x21, x22))
     tr = x00 + x11 + x22
-    psi = -0.5 * tr - cw * (phi - ctx[i, CTX_PHI0])
+    psi = ctx[i, CTX_PSI0] - 0.5 * tr - cw * (phi - ctx[i, CTX_PHI0])
     rr = math.sqrt(psi * psi + SPIN_EPS * SPIN_EPS)
     e = cap * (rr - SPIN_EPS)
     f1 = cap * psi / rr
@@ -654,6 +657,37 @@ def spin(th, R, R0, hand, i, ctx, gA, gC, A, B, C):
             h = -0.5 * (0.5 * (X[a][b] + X[b][a]) - (tr if a == b else 0.0))
             C[3 + a, 3 + b] += f2 * gw[a] * gw[b] + f1 * h
     return e
+
+
+# The torque a pad carries into its next action, at most this share of its limit: the
+# sliding's excess is dissipated (a return mapping), so a spin that reverses turns the
+# torque over within a few eps rather than unwinding the whole slide.
+SPIN_CARRY = 0.95
+
+
+@njit(cache=True, inline="always", _nrt=False)
+def carried_spin(th, R, R0, hand, i, ctx):
+    """Pad i's spin to carry into the next action: psi at the iterate (`spin`), its part
+    within the stick, |psi| <= eps c / sqrt(1 - c^2), c = SPIN_CARRY (where the smoothed
+    torque reaches c times the limit)."""
+    k_n = th.shape[1]
+    n0x, n0y, n0z = ctx[i, CTX_N0], ctx[i, CTX_N0 + 1], ctx[i, CTX_N0 + 2]
+    rb = hand.base_rot
+    cw = -(n0x * rb[i, 0, 0] + n0y * rb[i, 1, 0] + n0z * rb[i, 2, 0])
+    phi = 0.0
+    for k in range(k_n):
+        phi += th[i, k]
+    # n0 . vee_asym(R R0^T), M_ab = R_a . R0_b (rows)
+    m21 = R[2, 0] * R0[1, 0] + R[2, 1] * R0[1, 1] + R[2, 2] * R0[1, 2]
+    m12 = R[1, 0] * R0[2, 0] + R[1, 1] * R0[2, 1] + R[1, 2] * R0[2, 2]
+    m02 = R[0, 0] * R0[2, 0] + R[0, 1] * R0[2, 1] + R[0, 2] * R0[2, 2]
+    m20 = R[2, 0] * R0[0, 0] + R[2, 1] * R0[0, 1] + R[2, 2] * R0[0, 2]
+    m10 = R[1, 0] * R0[0, 0] + R[1, 1] * R0[0, 1] + R[1, 2] * R0[0, 2]
+    m01 = R[0, 0] * R0[1, 0] + R[0, 1] * R0[1, 1] + R[0, 2] * R0[1, 2]
+    turn = 0.5 * (n0x * (m21 - m12) + n0y * (m02 - m20) + n0z * (m10 - m01))
+    psi = ctx[i, CTX_PSI0] + turn - cw * (phi - ctx[i, CTX_PHI0])
+    lim = SPIN_EPS * SPIN_CARRY / math.sqrt(1.0 - SPIN_CARRY * SPIN_CARRY)
+    return max(-lim, min(lim, psi))
 
 
 @njit(cache=True, inline="always", _nrt=False)

@@ -23,9 +23,10 @@ Hand = namedtuple("Hand", "base_pos base_rot radii rest lo hi link_mass link_com
 # seg (P, N, K), nrm (P, N, 3) the pad normals in D, anc (P, N, 3) the anchors in O,
 # pos (P, 3), rot (P, 3, 3), stiff (P, N, K), kt (P, N), mass (P,), com (P, 3), rho (P, N)
 # each contact's radius of curvature, tangent (P, N_TANGENT, N) the equilibrium's
-# derivative by the commands (`TANGENT_*`), valid (P,) bool.
+# derivative by the commands (`TANGENT_*`), spin (P, N) each pad's carried spin [rad] (the
+# torsional friction's stick, `vlr.kernels.contacts.spin`), valid (P,) bool.
 Particles = namedtuple("Particles", "theta seg nrm anc pos rot stiff kt mass com rho "
-                                    "tangent valid")
+                                    "tangent spin valid")
 
 # The object's local surface (`vlr.surface.LocalSurface`): kind (SURF_*), radius [m], axis
 # (3,) a cylinder's in O, flat_radius: a contact radius at or above it is a plane.
@@ -49,10 +50,10 @@ OK, NONFINITE, NO_CONVERGENCE, JUMP, INACTIVE = 0, 1, 2, 3, 4
 # at x0 in the palm frame n0 (3), whose tangent plane the slip is measured in; the
 # tangential stretch at x0 in O, t0 (3), carried by the object's turn; the normal force
 # the friction's limit is held at, lambda_n (inf: none); the pad's torsional friction's
-# limit mu_t lambda_n [N m] (0: none).
+# limit mu_t lambda_n [N m] (0: none); the pad's spin carried from the last solve [rad].
 (CTX_KIND, CTX_O, CTX_DIR, CTX_RHO, CTX_CO0, CTX_CD0, CTX_PHI0, CTX_N0, CTX_T0,
- CTX_CAP, CTX_SPIN) = (0, 1, 4, 7, 8, 11, 14, 15, 18, 21, 22)
-N_CTX = 23
+ CTX_CAP, CTX_SPIN, CTX_PSI0) = (0, 1, 4, 7, 8, 11, 14, 15, 18, 21, 22, 23)
+N_CTX = 24
 
 # The multipliers of one contact (N, N_LAM): the gap's force sigma = k_c g (negative when
 # the pad presses) and the tangential force (3, palm).

@@ -144,7 +144,8 @@ def _rolling(motion, state, q, theta, pos, rot) -> float:
             vee = 0.5 * np.array([turn[2, 1] - turn[1, 2], turn[0, 2] - turn[2, 0],
                                   turn[1, 0] - turn[0, 1]])
             om = -m.base_rot[i][:, 0]
-            psi = n0 @ vee - (n0 @ om) * (theta[i].sum() - th0[i].sum())
+            psi0 = 0.0 if state.spin is None else float(state.spin[q, i])
+            psi = psi0 + n0 @ vee - (n0 @ om) * (theta[i].sum() - th0[i].sum())
             cap = cfg.spin_friction * lam_n
             e += cap * (math.sqrt(psi * psi + SPIN_EPS * SPIN_EPS) - SPIN_EPS)
     return e

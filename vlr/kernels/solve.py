@@ -43,6 +43,7 @@ from vlr.kernels.arrow import factor, solve
 from vlr.kernels.chain import distal_point, finger_chain, hand_terms, object_gravity, to_palm
 from vlr.kernels.contacts import (
     STICK_ZONE,
+    carried_spin,
     friction,
     pinned,
     rolled,
@@ -52,6 +53,7 @@ from vlr.kernels.contacts import (
 )
 from vlr.kernels.records import (
     CTX_CAP,
+    CTX_PSI0,
     CTX_SPIN,
     INACTIVE,
     JUMP,
@@ -481,6 +483,9 @@ def solve_one(q, ps, hand, srf, cfg, u0, u1, predict, max_iter, sc):
     mass, com, rho, tangent = ps.mass[q], ps.com[q], ps.rho[q], ps.tangent[q]
     n_f, k_n = th.shape
     _start(th, seg, nrm, anc, p, R, rho, hand, srf, cfg, sc)
+    if cfg.spin > 0.0:
+        for i in range(n_f):
+            sc.ctx[i, CTX_PSI0] = ps.spin[q, i]
     for c in range(n_f):
         sc.du[c] = u1[c] - u0[c]
         sc.u_b[c] = u1[c]
@@ -534,6 +539,9 @@ def solve_one(q, ps, hand, srf, cfg, u0, u1, predict, max_iter, sc):
     if big > cfg.jump_theta or dp > cfg.jump_pos:
         return JUMP, evals
     _store_tangent(th, kt, tangent, hand, cfg, sc, n_f, k_n)
+    if rolling_friction and cfg.spin > 0.0:
+        for i in range(n_f):
+            ps.spin[q, i] = carried_spin(th, R, sc.R0, hand, i, sc.ctx)
     if rolling_friction:
         # The stretch each anchor carries on: the elastic part, the one whose force is the
         # contact's force now (`contacts.friction` inverted; the stick's lambda / k_c).
@@ -659,6 +667,8 @@ def evaluate_at(q, ps, hand, srf, cfg, th, p, R, u, lam, gA, gC, A, B, C, vals, 
            hand, srf, cfg, sc)
     if cfg.contacts and cfg.rolling:
         _hold_friction(cfg, sc, n_f)
+        for i in range(n_f):
+            sc.ctx[i, CTX_PSI0] = ps.spin[q, i]
     for i in range(n_f):
         for a in range(N_LAM):
             if not math.isnan(lam[i, a]):
