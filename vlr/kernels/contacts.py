@@ -667,9 +667,16 @@ SPIN_CARRY = 0.95
 
 @njit(cache=True, inline="always", _nrt=False)
 def carried_spin(th, R, R0, hand, i, ctx):
-    """Pad i's spin to carry into the next action: psi at the iterate (`spin`), its part
-    within the stick, |psi| <= eps c / sqrt(1 - c^2), c = SPIN_CARRY (where the smoothed
-    torque reaches c times the limit)."""
+    """Pad i's spin to carry into the next action: psi at the iterate (`spin_angle`), its
+    part within the stick, |psi| <= eps c / sqrt(1 - c^2), c = SPIN_CARRY (where the
+    smoothed torque reaches c times the limit)."""
+    lim = SPIN_EPS * SPIN_CARRY / math.sqrt(1.0 - SPIN_CARRY * SPIN_CARRY)
+    return max(-lim, min(lim, spin_angle(th, R, R0, hand, i, ctx)))
+
+
+@njit(cache=True, inline="always", _nrt=False)
+def spin_angle(th, R, R0, hand, i, ctx):
+    """Pad i's spin psi at the iterate (`spin`'s), the carried one included [rad]."""
     k_n = th.shape[1]
     n0x, n0y, n0z = ctx[i, CTX_N0], ctx[i, CTX_N0 + 1], ctx[i, CTX_N0 + 2]
     rb = hand.base_rot
@@ -685,9 +692,7 @@ def carried_spin(th, R, R0, hand, i, ctx):
     m10 = R[1, 0] * R0[0, 0] + R[1, 1] * R0[0, 1] + R[1, 2] * R0[0, 2]
     m01 = R[0, 0] * R0[1, 0] + R[0, 1] * R0[1, 1] + R[0, 2] * R0[1, 2]
     turn = 0.5 * (n0x * (m21 - m12) + n0y * (m02 - m20) + n0z * (m10 - m01))
-    psi = ctx[i, CTX_PSI0] + turn - cw * (phi - ctx[i, CTX_PHI0])
-    lim = SPIN_EPS * SPIN_CARRY / math.sqrt(1.0 - SPIN_CARRY * SPIN_CARRY)
-    return max(-lim, min(lim, psi))
+    return ctx[i, CTX_PSI0] + turn - cw * (phi - ctx[i, CTX_PHI0])
 
 
 @njit(cache=True, inline="always", _nrt=False)

@@ -42,6 +42,7 @@ from numba import njit, prange
 from vlr.kernels.arrow import factor, solve
 from vlr.kernels.chain import distal_point, finger_chain, hand_terms, object_gravity, to_palm
 from vlr.kernels.contacts import (
+    SPIN_EPS,
     STICK_ZONE,
     carried_spin,
     friction,
@@ -49,6 +50,7 @@ from vlr.kernels.contacts import (
     rolled,
     rolling,
     spin,
+    spin_angle,
     start_context,
 )
 from vlr.kernels.records import (
@@ -497,15 +499,26 @@ def solve_one(q, ps, hand, srf, cfg, u0, u1, predict, max_iter, sc):
         _hold_friction(cfg, sc, n_f)
     ok, evals = newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u1, hand, cfg, sc,
                        max_iter, prev)
-    if rolling_friction and math.isfinite(cfg.friction):
+    if rolling_friction and (math.isfinite(cfg.friction) or cfg.spin > 0.0):
         # Active set of the cone: a stuck contact whose force left its cone slides from
-        # here, with the limit at its normal force; a sliding one whose normal force
-        # ended far from the limit held is solved again with the limit where it ended.
+        # here, with the limit at its normal force; a sliding one (or a spinning pad) whose
+        # normal force ended far from the limit held is solved again with the limit where
+        # it ended, so that the solve's limits are its end's, whatever its start.
         for _round in range(FRICTION_ROUNDS):
             if not ok:
                 break
             again = False
+            if cfg.spin > 0.0:
+                for i in range(n_f):
+                    held = sc.ctx[i, CTX_SPIN] / cfg.spin
+                    lam_n = max(0.0, -sc.lam[i, LAM_N])
+                    if (abs(spin_angle(th, R, sc.R0, hand, i, sc.ctx)) > SPIN_EPS
+                            and abs(lam_n - held) > 0.02 * held + 0.01):
+                        again = True
+                        sc.ctx[i, CTX_SPIN] = cfg.spin * lam_n
             for i in range(n_f):
+                if not math.isfinite(cfg.friction):
+                    break
                 held = sc.ctx[i, CTX_CAP]
                 lam_n = max(0.0, -sc.lam[i, LAM_N])
                 lt = math.sqrt(sc.lam[i, LAM_T] ** 2 + sc.lam[i, LAM_T + 1] ** 2
@@ -521,7 +534,7 @@ def solve_one(q, ps, hand, srf, cfg, u0, u1, predict, max_iter, sc):
             if not again:
                 break
             for i in range(n_f):
-                if math.isfinite(sc.ctx[i, CTX_CAP]):
+                if math.isfinite(cfg.friction) and math.isfinite(sc.ctx[i, CTX_CAP]):
                     _friction_force(sc.lam, i, cfg.kc, cfg.friction, sc.ctx[i, CTX_CAP],
                                     sc.KO)
             ok, more = newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u1, hand, cfg,
