@@ -56,10 +56,13 @@ def test_the_prediction_and_the_tolerances_land_within_what_the_likelihood_sees(
         obj_name, unknowns):
     """With the stored tangent's prediction and at the filter's tolerances
     (`MotionConfig.tol_theta`, `tol_pos`), the POM poses the likelihood weighs land within
-    a tenth of its finest scales (0.2 mm, 0.4 degree) of a solve without the prediction at
-    tolerances 2000 times finer, on 98% of the particles; a particle at a fold may end on
-    another branch (measured: 1.7% beyond it with each particle's own curvature, a few
-    nearly flat ones; none on the others)."""
+    the camera's own noise (0.05 mm; a quarter of the likelihood's finest scales, 0.2 mm and
+    0.4 degree) of a solve without the prediction at tolerances 2000 times finer, on 98% of
+    the particles. What separates the two is the pads' spin friction: its limit follows the
+    normal force it ends at to 2% (`kernels.solve`), and the two starts reach that fixed
+    point from either side (measured at the 98th percentile: 0.027, 0.028, 0.007 and
+    0.040 mm, 0.024-0.033 degree; a 0.5% fixed point gave 0.015-0.030 mm for an action 12%
+    dearer). A particle at a fold may end on another branch."""
     pf, u1 = _filter(obj_name, unknowns=unknowns)
     m, u0 = pf.motion, pf.command.copy()
     a, b = pf.state.copy(), pf.state.copy()
@@ -68,8 +71,8 @@ def test_the_prediction_and_the_tolerances_land_within_what_the_likelihood_sees(
     b.tangent = None   # no prediction
     m.solve(b, u1, tight, u_from=u0)
     d_pos, d_rot = _pom_gaps(a, b)
-    assert np.quantile(d_pos, 0.98) < 0.02e-3
-    assert np.quantile(d_rot, 0.98) < 0.04
+    assert np.quantile(d_pos, 0.98) < 0.05e-3
+    assert np.quantile(d_rot, 0.98) < 0.1
 
 
 @pytest.mark.parametrize("obj_name, unknowns", CASES[:3])
@@ -91,13 +94,14 @@ def test_one_solve_lands_near_its_many_step_limit(obj_name, unknowns):
 
 
 def test_the_newton_steps_an_action_and_a_settle_cost():
-    """The filter's iteration on the apple at the sim's settings, counted: an action 1.7
-    Newton-step equivalents per particle (mean; the stored tangent's prediction and one or
-    two corrections), 1 at the median. The bounds are a regression of the solver, not of
-    the machine."""
+    """The filter's iteration on the apple at the sim's settings, counted: an action 4.8
+    Newton-step equivalents per particle (mean; 4 at the median: the stored tangent's
+    prediction and its corrections, 2 without the pads' spin friction, then the solve
+    again where a spinning pad's normal force ended off its limit). The bounds are a
+    regression of the solver, not of the machine."""
     pf, u1 = _filter("apple")
     rec = pf.step(u1, None)
     assert rec is not None
-    assert pf.newton_iterations["action"] <= 2
-    assert pf.profile["action_mean"] <= 2.5
+    assert pf.newton_iterations["action"] <= 4
+    assert pf.profile["action_mean"] <= 5.5
     assert pf.profile["failed_share"] < 0.05

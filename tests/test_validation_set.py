@@ -1,6 +1,7 @@
 """The validation set (models/README.md, "Validation set"): objects and fingers the
 identification's defaults were not tuned on. Their grasps hold through a trial's actions."""
 
+import numpy as np
 import pytest
 from vlr.models.check_grasps import check_hold
 
@@ -30,9 +31,8 @@ def _identify(obj: str, **more) -> dict:
 
 # One row per object kind and one new finger, reduced (3,000 particles, 12 actions, seed 0)
 # from docs/sweeps/validation.yaml (60,000, 20 or 35, seeds 0-4; docs/RESULTS.md). Measured
-# at these settings on 2026-12-04: proximal 0.40 / 0.86 /
-# 0.99 / 0.86 deg, coverage 0.83 / 0.83 / 0.83 / 1.0 (1.0 within 0.1 deg each). Thresholds sit
-# above the measured figures; never loosen one to pass.
+# at these settings: proximal 0.14 / 0.55 / 0.69 / 1.24 deg, coverage 1.0 within 0.1 deg
+# each. Thresholds sit above the measured figures; never loosen one to pass.
 @pytest.mark.slow
 @pytest.mark.parametrize("obj, max_proximal_deg", [
     ("tennis_ball", 1.0), ("cylinder_lying", 1.5), ("cylinder_upright", 1.5),
@@ -45,12 +45,16 @@ def test_validation_known_hand(obj, max_proximal_deg):
 
 @pytest.mark.slow
 def test_validation_nh4_unknown_links():
-    r = _identify("apple", **{"world.true_hand": "nh4", "loop.max_iterations": 20,
-                              "filter.unknowns": ["length:right.proximal",
-                                                  "length:right.distal"]})
-    # Measured (20 actions): link 2.79 mm, proximal 1.27 deg, coverage 0.75.
-    assert r["errors"]["link_length_mm"]["right"] < 4.0
-    assert r["errors"]["proximal_deg_mean"] < 2.0
+    # NH4's link after 20 actions is known to about its 12 mm interval's width, so one
+    # seed's error is a draw: 1.5-6.5 mm over seeds 0-5 at 3,000 particles, 0.9-6.0 at
+    # 10,000. The guard is the mean of six seeds: measured 3.47 mm, proximal 0.92 deg.
+    rows = [_identify("apple", **{"seed": seed, "world.true_hand": "nh4",
+                                  "loop.max_iterations": 20,
+                                  "filter.unknowns": ["length:right.proximal",
+                                                      "length:right.distal"]})
+            for seed in range(6)]
+    assert np.mean([r["errors"]["link_length_mm"]["right"] for r in rows]) < 4.0
+    assert np.mean([r["errors"]["proximal_deg_mean"] for r in rows]) < 2.0
 
 
 @pytest.mark.parametrize("argv, named", [(["modelo:nosuch"], "nosuch"),
