@@ -464,7 +464,8 @@ class MotionModel:
         evals = np.zeros(state.n, dtype=np.int32)
         self.followed = np.zeros(state.n, dtype=np.bool_)
         ksolve.solve_batch(self.particles(state), hand, self._surface, cfg, u0, u1,
-                           u_from is not None and PREDICT, status, evals, self.followed)
+                           u_from is not None and PREDICT,
+                           rec.Outcome(status, evals, self.followed))
         return status, evals
 
     def evaluate(self, state: ParticleState, q: int, u: np.ndarray, theta=None, pos=None,
@@ -500,13 +501,14 @@ class MotionModel:
         return float(e), np.concatenate([gA.ravel(), gC]), H
 
     def _evaluate(self, state, q, u, th, p, R, lam):
-        nf, nk = self.model.n_fingers, self.model.n_joints
-        gA, gC = np.empty((nf, nk)), np.empty(6)
-        A, B, C = np.empty((nf, nk, nk)), np.empty((nf, nk, 6)), np.empty((6, 6))
-        vals, jac = np.empty((nf, 4)), np.empty((nf, 4, nk + 6))
-        e = ksolve.evaluate_at(q, self.particles(state), self._hand, self._surface,
-                               self._settings, th, p, R, u, lam, gA, gC, A, B, C, vals, jac)
-        return e, gA, gC, A, B, C, vals
+        e, sc = ksolve.evaluate_at(q, self.particles(state), self.kernel_model(),
+                                   rec.Pose(th, p, R), u, lam)
+        return e, sc.gA, sc.gC, sc.A, sc.B, sc.C, sc.vals
+
+    def kernel_model(self) -> rec.Model:
+        """The kernels' record of the hand, the object's surface and the solver's settings
+        (`vlr.kernels.records.Model`)."""
+        return rec.Model(self._hand, self._surface, self._settings)
 
     def _primal_multipliers(self, state, q, u, th, p, R) -> np.ndarray:
         """The contacts' forces at (th, p, R): k_c g and the stretch's force (the stick's

@@ -117,9 +117,10 @@ def _invert_spd(A, i, k_n, damping, Ainv, La):
 
 
 @njit(cache=True, _nrt=False)
-def solve(gA, gC, B, Ainv, X, S, dth, dc, y):
-    """The Newton step H d = -g from a factorisation (`factor`): dth (N, K), dc (6,); y
-    (N, K) scratch."""
+def solve(gA, gC, B, fac, dth, dc, y):
+    """The Newton step H d = -g from a factorisation (`factor`'s Ainv, X, S, as `fac`):
+    dth (N, K), dc (6,); y (N, K) scratch."""
+    Ainv, X, S = fac
     n_f, k_n = gA.shape
     for a in range(6):
         dc[a] = -gC[a]

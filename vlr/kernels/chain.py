@@ -36,9 +36,12 @@ def finger_chain(th, seg, i, sphi, cphi, qy, qz):
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def distal_point(seg, i, k_n, sphi, cphi, qy, qz, dx, dy, dz):
-    """The point (dx, dy, dz) of finger i's distal frame D, less the pad centre's z (a
-    segment), in F: the chain's last joint plus the rotation by the summed angle."""
+def distal_point(seg, i, k_n, chain, d):
+    """The point d = (dx, dy, dz) of finger i's distal frame D, less the pad centre's z (a
+    segment), in F: the chain's last joint plus the rotation by the summed angle. `chain`
+    = (sphi, cphi, qy, qz), filled by `finger_chain`."""
+    sphi, cphi, qy, qz = chain
+    dx, dy, dz = d
     s, c = sphi[k_n - 1], cphi[k_n - 1]
     z = seg[i, k_n - 1] + dz
     return dx, qy[k_n - 1] + dy * c + z * s, qz[k_n - 1] - dy * s + z * c
@@ -66,9 +69,12 @@ def distal_rotation(hand, i, phi, out):
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def hand_terms(th, stiff, kt, u, hand, cfg, i, sphi, cphi, qy, qz, gA, A):
-    """Finger i's springs (Eq. 6), stops, series tendon (Eq. 7 compliant) and link weights,
-    into gA, A; returns their energy [J]. The chain (`finger_chain`) must be filled."""
+def hand_terms(th, body, hand, cfg, i, sc):
+    """Finger i's springs (Eq. 6), stops, series tendon (Eq. 7 compliant, at the commands
+    sc.u_b) and link weights, into sc.gA, sc.A; returns their energy [J]. The chain
+    (`finger_chain`, into sc) must be filled."""
+    stiff, kt, u = body.stiff, body.kt, sc.u_b
+    sphi, cphi, qy, qz, gA, A = sc.sphi, sc.cphi, sc.qy, sc.qz, sc.gA, sc.A
     k_n = th.shape[1]
     e = 0.0
     if cfg.springs:
@@ -172,7 +178,7 @@ def contact_points_batch(theta, seg, nrm, hand, out):
             for i in range(n_f):
                 finger_chain(th, sg, i, sphi, cphi, qy, qz)
                 r = hand.pad_r[i]
-                fx, fy, fz = distal_point(sg, i, k_n, sphi, cphi, qy, qz,
-                                          hand.pad_xy[i, 0] + r * nr[i, 0],
-                                          hand.pad_xy[i, 1] + r * nr[i, 1], r * nr[i, 2])
+                fx, fy, fz = distal_point(sg, i, k_n, (sphi, cphi, qy, qz),
+                                          (hand.pad_xy[i, 0] + r * nr[i, 0],
+                                           hand.pad_xy[i, 1] + r * nr[i, 1], r * nr[i, 2]))
                 out[q, i, 0], out[q, i, 1], out[q, i, 2] = to_palm(hand, i, fx, fy, fz)

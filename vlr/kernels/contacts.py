@@ -97,15 +97,18 @@ def _primitive(kind, ctx, i, r, kx, ky, kz, KO):
 
 
 @njit(cache=True, _nrt=False)
-def start_context(th, seg, nrm, anc, p, R, rho, hand, srf, cfg, i, chain, ctx, lam, KO, RD):
-    """Contact i's solve context at the particle's start x0 (`vlr.kernels.records` CTX_*)
-    and its multipliers there (the forces the anchors' stretch holds: lam (N, N_LAM)).
-    `chain` = (sphi, cphi, qy, qz), filled for finger i at x0."""
-    sphi, cphi, qy, qz = chain
+def start_context(x, body, hand, srf, cfg, i, sc):
+    """Contact i's solve context at the particle's start x0 = x (`vlr.kernels.records`
+    CTX_*, into sc.ctx) and its multipliers there (the forces the anchors' stretch holds:
+    sc.lam (N, N_LAM)). sc's chain is filled for finger i at x0."""
+    th, p, R = x
+    seg, nrm, anc, rho = body.seg, body.nrm, body.anc, body.rho
+    sphi, cphi, qy, qz = sc.sphi, sc.cphi, sc.qy, sc.qz
+    ctx, lam, KO, RD = sc.ctx, sc.lam, sc.KO, sc.RD
     k_n = th.shape[1]
     r = hand.pad_r[i]
-    kfx, kfy, kfz = distal_point(seg, i, k_n, sphi, cphi, qy, qz, hand.pad_xy[i, 0],
-                                 hand.pad_xy[i, 1], 0.0)
+    kfx, kfy, kfz = distal_point(seg, i, k_n, (sphi, cphi, qy, qz),
+                                 (hand.pad_xy[i, 0], hand.pad_xy[i, 1], 0.0))
     kx, ky, kz = to_palm(hand, i, kfx, kfy, kfz)
     phi = 0.0
     for k in range(k_n):
@@ -197,9 +200,12 @@ def start_context(th, seg, nrm, anc, p, R, rho, hand, srf, cfg, i, chain, ctx, l
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def _k_object(hand, i, k_n, kfy, kfz, R, qy, qz, kox, koy, koz, jk):
+def _k_object(hand, i, k_n, kf, ko, R, q, jk):
     """jk (3, K + 6): d k_O / d(theta_i, dp, dw), k_O = R^T (k - p) the pad centre in O
-    ((kfy, kfz) its y, z in F)."""
+    (ko), kf = (y, z) its y, z in F, q = (qy, qz) the chain's joints."""
+    kfy, kfz = kf
+    kox, koy, koz = ko
+    qy, qz = q
     rb = hand.base_rot
     for j in range(k_n):
         dy = kfy - qy[j]
@@ -220,9 +226,11 @@ def _k_object(hand, i, k_n, kfy, kfz, R, qy, qz, kox, koy, koz, jk):
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def _add_block(i, k_n, Jl, Gl, Jr, rows, w, A, B, C):
-    """Add w * Jl^T Gl Jr (Gl (rows, rows)) into the arrow blocks of finger i (the columns
+def _add_block(i, k_n, Jl, Gl, Jr, blocks):
+    """Add Jl^T Gl Jr (Gl (3, 3)) into the arrow blocks (A, B, C) of finger i (the columns
     of Jl, Jr: theta_i (K), then the object's 6)."""
+    A, B, C = blocks
+    rows = 3
     nc = k_n + 6
     for c1 in range(nc):
         for c2 in range(c1, nc):
@@ -232,7 +240,6 @@ def _add_block(i, k_n, Jl, Gl, Jr, rows, w, A, B, C):
                 for b in range(rows):
                     ga += Gl[a, b] * Jr[b, c2]
                 t += Jl[a, c1] * ga
-            t *= w
             _put(i, k_n, c1, c2, t, A, B, C)
 
 
@@ -252,9 +259,13 @@ def _put(i, k_n, c1, c2, t, A, B, C):
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def _point_curvature(i, k_n, lx, ly, lz, fy, fz, qy, qz, hand, A):
-    """The joints' second derivatives of a point fixed in finger i's distal frame, (fy, fz)
-    in F, weighted by the palm vector l: l . d2x / dtheta_j dtheta_m, into A."""
+def _point_curvature(i, k_n, lv, f, q, hand, A):
+    """The joints' second derivatives of a point fixed in finger i's distal frame, f = (fy,
+    fz) in F, weighted by the palm vector l = lv: l . d2x / dtheta_j dtheta_m, into A; q =
+    (qy, qz) the chain's joints."""
+    lx, ly, lz = lv
+    fy, fz = f
+    qy, qz = q
     rb = hand.base_rot
     for j in range(k_n):
         for m in range(j, k_n):
@@ -269,12 +280,10 @@ def _point_curvature(i, k_n, lx, ly, lz, fy, fz, qy, qz, hand, A):
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def _object_point_curvature(k_n, l0, l1, l2, c0, c1, c2, C):
-    """-(l' . R d2(exp([w]x) c) / dw^2), l' = R^T l (l0, l1, l2), c (in O): the rotation's
+def _object_point_curvature(lv, cv, C):
+    """-(l' . R d2(exp([w]x) c) / dw^2), l' = R^T l (lv), c (cv, in O): the rotation's
     second derivatives of a point fixed in O, into the object's block."""
-    lv = (l0, l1, l2)
-    cv = (c0, c1, c2)
-    lc = l0 * c0 + l1 * c1 + l2 * c2
+    lc = lv[0] * cv[0] + lv[1] * cv[1] + lv[2] * cv[2]
     for b in range(3):
         for c in range(3):
             h = 0.5 * (lv[b] * cv[c] + cv[b] * lv[c])
@@ -324,20 +333,23 @@ def friction(zx, zy, zz, kc, mu, lam_n, G):
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def rolling(th, seg, p, R, R0, hand, cfg, i, chain, ctx, lam, vals, jac, gA, gC, A, B, C,
-            w):
-    """Contact i, rolling (module docstring), at the iterate (th, p, R): its energy, into
-    the arrow blocks its gradient and Hessian, into vals[i], jac[i] its constraints (gap,
-    stretch) and their rows. `w` is the contact scratch (`solve.Scratch`)."""
-    sphi, cphi, qy, qz = chain
-    jk, dm, jz, t3, KO, RD, RD0, MO, MD = w
+def rolling(x, body, hand, cfg, i, sc):
+    """Contact i, rolling (module docstring), at the iterate x = (th, p, R) from the
+    solve's start (sc.ctx, sc.R0): its energy, into sc's arrow blocks its gradient and
+    Hessian, into sc.vals[i], sc.jac[i] its constraints (gap, stretch) and their rows."""
+    th, p, R = x
+    seg, R0, ctx, lam, vals, jac = body.seg, sc.R0, sc.ctx, sc.lam, sc.vals, sc.jac
+    gA, gC, A, B, C = sc.gA, sc.gC, sc.A, sc.B, sc.C
+    sphi, cphi, qy, qz = sc.sphi, sc.cphi, sc.qy, sc.qz
+    jk, dm, jz, t3, KO, RD, RD0, MO, MD = (sc.jk, sc.dm, sc.jz, sc.t3, sc.KO, sc.RD, sc.RD0,
+                                           sc.MO, sc.MD)
     k_n = th.shape[1]
     nc = k_n + 6
     kc = cfg.kc
     r = hand.pad_r[i]
     kind = int(ctx[i, CTX_KIND])
-    kfx, kfy, kfz = distal_point(seg, i, k_n, sphi, cphi, qy, qz, hand.pad_xy[i, 0],
-                                 hand.pad_xy[i, 1], 0.0)
+    kfx, kfy, kfz = distal_point(seg, i, k_n, (sphi, cphi, qy, qz),
+                                 (hand.pad_xy[i, 0], hand.pad_xy[i, 1], 0.0))
     kx, ky, kz = to_palm(hand, i, kfx, kfy, kfz)
     vx, vy, vz = kx - p[0], ky - p[1], kz - p[2]
     kox = R[0, 0] * vx + R[1, 0] * vy + R[2, 0] * vz
@@ -345,7 +357,7 @@ def rolling(th, seg, p, R, R0, hand, cfg, i, chain, ctx, lam, vals, jac, gA, gC,
     koz = R[0, 2] * vx + R[1, 2] * vy + R[2, 2] * vz
     g, mx, my, mz, _ = _primitive(kind, ctx, i, r, kox, koy, koz, KO)
     m = (mx, my, mz)
-    _k_object(hand, i, k_n, kfy, kfz, R, qy, qz, kox, koy, koz, jk)
+    _k_object(hand, i, k_n, (kfy, kfz), (kox, koy, koz), R, (qy, qz), jk)
     # dm = KO jk; the gap's row dg = m . jk; dc_O = jk - m dg - (g + r) dm (into jk's place
     # is not possible: jk is needed below), kept in t3.
     for c in range(nc):
@@ -481,7 +493,7 @@ def rolling(th, seg, p, R, R0, hand, cfg, i, chain, ctx, lam, vals, jac, gA, gC,
             gA[i, c] += gr
         else:
             gC[c - k_n] += gr
-    _add_block(i, k_n, jz, G, jz, 3, 1.0, A, B, C)
+    _add_block(i, k_n, jz, G, jz, (A, B, C))
     # The constraints' curvature weighted by the multipliers (sigma, lambda): exact. With
     # mu_O = MO^T lambda, nu = lambda + Q lambda (Q = RD RD0^T), nu' = R^T nu, lambda' =
     # R^T lambda:  lambda . s = mu_O . c_O(k_O) + r/2 nu . R m(k_O) + r/2 lambda . RD n_D0
@@ -501,7 +513,7 @@ def rolling(th, seg, p, R, R0, hand, cfg, i, chain, ctx, lam, vals, jac, gA, gC,
     lp = (R[0, 0] * lx + R[1, 0] * ly + R[2, 0] * lz,
           R[0, 1] * lx + R[1, 1] * ly + R[2, 1] * lz,
           R[0, 2] * lx + R[1, 2] * ly + R[2, 2] * lz)
-    _surface_curvature(kind, ctx, i, r, g, m, KO, kc, sig, muo, nup, G, t3)
+    _surface_curvature(kind, ctx, i, (r, g, m), KO, (kc, sig, muo, nup), G)
     # gamma = sigma m + Q_O mu_O + r/2 KO nu', Q_O = I - m m^T - (g + r) KO
     mmu = m[0] * muo[0] + m[1] * muo[1] + m[2] * muo[2]
     gam0 = gam1 = gam2 = 0.0
@@ -515,13 +527,12 @@ def rolling(th, seg, p, R, R0, hand, cfg, i, chain, ctx, lam, vals, jac, gA, gC,
             gam1 = v
         else:
             gam2 = v
-    _add_block(i, k_n, jk, G, jk, 3, 1.0, A, B, C)
-    _k_curvature(i, k_n, gam0, gam1, gam2, kfy, kfz, kox, koy, koz, R, qy, qz, jk, hand,
-                 A, B, C)
+    _add_block(i, k_n, jk, G, jk, (A, B, C))
+    _k_curvature(i, k_n, (gam0, gam1, gam2), (kfy, kfz), (kox, koy, koz), R, hand, sc)
     # R's own turn: 1/2 lambda' . d2(exp) (c_O - c_O0) + r/2 nu' . d2(exp) m
-    _rotation_curvature(k_n, 0.5, lp[0], lp[1], lp[2], dox, doy, doz, C)
-    _rotation_curvature(k_n, 1.0, lp[0], lp[1], lp[2], t0x, t0y, t0z, C)
-    _rotation_curvature(k_n, 0.5 * r, nup[0], nup[1], nup[2], mx, my, mz, C)
+    _rotation_curvature(0.5, lp, (dox, doy, doz), C)
+    _rotation_curvature(1.0, lp, (t0x, t0y, t0z), C)
+    _rotation_curvature(0.5 * r, nup, (mx, my, mz), C)
     # R's turn by the rest: 1/2 (dc_O x lambda') + r/2 (dm x nu'), both orders; RD's turn
     # (Q's) by n_P's change: r/2 (om x Q lambda) . dn_P, both orders.
     zx2 = omy * qlz - omz * qly
@@ -572,8 +583,9 @@ def rolling(th, seg, p, R, R0, hand, cfg, i, chain, ctx, lam, vals, jac, gA, gC,
     cdx = RD[0, 0] * c0 + RD[0, 1] * c1 + RD[0, 2] * c2
     cdy = RD[1, 0] * c0 + RD[1, 1] * c1 + RD[1, 2] * c2
     cdz = RD[2, 0] * c0 + RD[2, 1] * c1 + RD[2, 2] * c2
-    hqq = (0.5 * r * _double_turn(omx, omy, omz, qlx, qly, qlz, npx, npy, npz)
-           + 0.5 * _double_turn(omx, omy, omz, cdx, cdy, cdz, lx, ly, lz))
+    om = (omx, omy, omz)
+    hqq = (0.5 * r * _double_turn(om, (qlx, qly, qlz), (npx, npy, npz))
+           + 0.5 * _double_turn(om, (cdx, cdy, cdz), (lx, ly, lz)))
     for j in range(k_n):
         for k in range(k_n):
             A[i, j, k] += hqq
@@ -586,7 +598,7 @@ SPIN_EPS = 5e-3
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def spin(th, R, R0, hand, i, ctx, gA, gC, A, B, C):
+def spin(x, hand, i, sc):
     """Pad i's torsional friction over the solve (the pads' spin, rate-independent Coulomb
     friction as an incremental dissipation potential): mu_t lambda_n (sqrt(psi^2 + eps^2)
     - eps), psi the object's turn relative to the pad about the start's normal n0,
@@ -597,7 +609,10 @@ def spin(th, R, R0, hand, i, ctx, gA, gC, A, B, C):
     om the finger's joint axis in the palm, psi0 the spin the pad carries from its last
     action (ctx's CTX_PSI0: the stick's, `carried_spin`); its limit mu_t lambda_n (ctx's
     CTX_SPIN) held at the solve's predicted normal force. Adds its gradient and exact
-    Hessian into the arrow blocks; returns its energy."""
+    Hessian into sc's arrow blocks; returns its energy. x = (th, p, R) the iterate, sc.R0
+    the start's rotation."""
+    th, _, R = x
+    R0, ctx, gA, gC, A, B, C = sc.R0, sc.ctx, sc.gA, sc.gC, sc.A, sc.B, sc.C
     cap = ctx[i, CTX_SPIN]
     k_n = th.shape[1]
     n0x, n0y, n0z = ctx[i, CTX_N0], ctx[i, CTX_N0 + 1], ctx[i, CTX_N0 + 2]
@@ -707,19 +722,20 @@ def _mt3(R, R0, lx, ly, lz):
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def _double_turn(ox, oy, oz, vx, vy, vz, wx, wy, wz):
+def _double_turn(om, v, w):
     """(om x (om x v)) . w = (om . v)(om . w) - |om|^2 (v . w)."""
+    ox, oy, oz = om
+    vx, vy, vz = v
+    wx, wy, wz = w
     return ((ox * vx + oy * vy + oz * vz) * (ox * wx + oy * wy + oz * wz)
             - (ox * ox + oy * oy + oz * oz) * (vx * wx + vy * wy + vz * wz))
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def _rotation_curvature(k_n, w, lx, ly, lz, cx, cy, cz, C):
-    """w times the Hessian in dw of l' . exp([dw]x) c (l', c in O): 1/2 (l' c^T + c l'^T)
-    - (l' . c) I, into the object's rotation block."""
-    lv = (lx, ly, lz)
-    cv = (cx, cy, cz)
-    lc = lx * cx + ly * cy + lz * cz
+def _rotation_curvature(w, lv, cv, C):
+    """w times the Hessian in dw of l' . exp([dw]x) c (l' = lv, c = cv in O): 1/2 (l' c^T
+    + c l'^T) - (l' . c) I, into the object's rotation block."""
+    lc = lv[0] * cv[0] + lv[1] * cv[1] + lv[2] * cv[2]
     for b in range(3):
         for c in range(3):
             h = 0.5 * (lv[b] * cv[c] + cv[b] * lv[c])
@@ -753,11 +769,13 @@ def _normal_curvature(kind, ctx, i, m, L, mu, out, w):
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def _surface_curvature(kind, ctx, i, r, g, m, KO, kc, sig, muo, nup, G, scratch):
+def _surface_curvature(kind, ctx, i, geo, KO, weights, G):
     """G (3, 3) = k_c m m^T + sigma KO + Gamma_c(mu_O) + r/2 Gamma_m(nu'): the Hessian in
     k_O of the gap's energy and multiplier and of the slip's terms through k_O, with
     Gamma_c(mu) = -[m (KO mu)^T + (KO mu) m^T + (g + r) Gamma_m(mu) + (mu . m) KO] the
-    curvature of mu . c_O."""
+    curvature of mu . c_O; geo = (r, g, m), weights = (k_c, sigma, mu_O, nu')."""
+    r, g, m = geo
+    kc, sig, muo, nup = weights
     mmu = m[0] * muo[0] + m[1] * muo[1] + m[2] * muo[2]
     kmu = (KO[0, 0] * muo[0] + KO[0, 1] * muo[1] + KO[0, 2] * muo[2],
            KO[1, 0] * muo[0] + KO[1, 1] * muo[1] + KO[1, 2] * muo[2],
@@ -772,15 +790,19 @@ def _surface_curvature(kind, ctx, i, r, g, m, KO, kc, sig, muo, nup, G, scratch)
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def _k_curvature(i, k_n, gx, gy, gz, kfy, kfz, kox, koy, koz, R, qy, qz, jk, hand, A, B, C):
-    """gamma . d2 k_O (gamma (gx, gy, gz) in O; k_O = R^T (k - p), R <- R exp([dw]x)): the
-    joints' (the pad centre's curvature), joint and position by rotation (gamma x the
-    column of d k_O), and rotation by rotation, into the arrow blocks."""
+def _k_curvature(i, k_n, gv, kf, kv, R, hand, sc):
+    """gamma . d2 k_O (gamma = gv in O; k_O = R^T (k - p) = kv, kf = (y, z) the pad
+    centre's in F, R <- R exp([dw]x)): the joints' (the pad centre's curvature), joint and
+    position by rotation (gamma x the column of d k_O, sc.jk), and rotation by rotation,
+    into sc's arrow blocks."""
+    gx, gy, gz = gv
+    kox, koy, koz = kv
+    qy, qz, jk, A, B, C = sc.qy, sc.qz, sc.jk, sc.A, sc.B, sc.C
     # joints: (R gamma) . d2 k / dtheta_j dtheta_m
     lx = R[0, 0] * gx + R[0, 1] * gy + R[0, 2] * gz
     ly = R[1, 0] * gx + R[1, 1] * gy + R[1, 2] * gz
     lz = R[2, 0] * gx + R[2, 1] * gy + R[2, 2] * gz
-    _point_curvature(i, k_n, lx, ly, lz, kfy, kfz, qy, qz, hand, A)
+    _point_curvature(i, k_n, (lx, ly, lz), kf, (qy, qz), hand, A)
     # (theta_j or p_a) by w_b: (gamma x jk[:, col])_b
     for col in range(k_n + 3):
         ux, uy, uz = jk[0, col], jk[1, col], jk[2, col]
@@ -792,8 +814,6 @@ def _k_curvature(i, k_n, gx, gy, gz, kfy, kfz, kox, koy, koz, R, qy, qz, jk, han
                 C[col - k_n, 3 + b] += cr[b]
                 C[3 + b, col - k_n] += cr[b]
     # w by w: 1/2 (gamma k^T + k gamma^T) - (gamma . k) I
-    gv = (gx, gy, gz)
-    kv = (kox, koy, koz)
     gk = gx * kox + gy * koy + gz * koz
     for b in range(3):
         for c in range(3):
@@ -804,20 +824,23 @@ def _k_curvature(i, k_n, gx, gy, gz, kfy, kfz, kox, koy, koz, R, qy, qz, jk, han
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def pinned(th, seg, nrm, anc, p, R, hand, cfg, i, chain, lam, vals, jac, gA, gC, A, B, C,
-           jv):
+def pinned(x, body, hand, cfg, i, sc):
     """Contact i pinned (Eq. 8 as a stiff penalty): the pad's contact point (fixed in D)
-    held to its anchor a (fixed in O), 1/2 k_c |x_D - (p + R a)|^2. Its energy; gradient
-    and Hessian into the arrow blocks, the offset and its rows into vals[i, 1:],
-    jac[i, 1:]; jv (3, K + 6) scratch."""
-    sphi, cphi, qy, qz = chain
+    held to its anchor a (fixed in O), 1/2 k_c |x_D - (p + R a)|^2, at the iterate x =
+    (th, p, R). Its energy; gradient and Hessian into sc's arrow blocks, the offset and its
+    rows into sc.vals[i, 1:], sc.jac[i, 1:]."""
+    th, p, R = x
+    seg, nrm, anc = body.seg, body.nrm, body.anc
+    lam, vals, jac, jv = sc.lam, sc.vals, sc.jac, sc.jk
+    gA, gC, A, B, C = sc.gA, sc.gC, sc.A, sc.B, sc.C
+    sphi, cphi, qy, qz = sc.sphi, sc.cphi, sc.qy, sc.qz
     k_n = th.shape[1]
     nc = k_n + 6
     kc = cfg.kc
     r = hand.pad_r[i]
-    fx, fy, fz = distal_point(seg, i, k_n, sphi, cphi, qy, qz,
-                              hand.pad_xy[i, 0] + r * nrm[i, 0],
-                              hand.pad_xy[i, 1] + r * nrm[i, 1], r * nrm[i, 2])
+    fx, fy, fz = distal_point(seg, i, k_n, (sphi, cphi, qy, qz),
+                              (hand.pad_xy[i, 0] + r * nrm[i, 0],
+                               hand.pad_xy[i, 1] + r * nrm[i, 1], r * nrm[i, 2]))
     xx, xy, xz = to_palm(hand, i, fx, fy, fz)
     ax, ay, az = anc[i, 0], anc[i, 1], anc[i, 2]
     v = (xx - p[0] - (R[0, 0] * ax + R[0, 1] * ay + R[0, 2] * az),
@@ -855,26 +878,30 @@ def pinned(th, seg, nrm, anc, p, R, hand, cfg, i, chain, lam, vals, jac, gA, gC,
             t = kc * (jv[0, c] * jv[0, c2] + jv[1, c] * jv[1, c2] + jv[2, c] * jv[2, c2])
             _put(i, k_n, c, c2, t, A, B, C)
     lx, ly, lz = lam[i, LAM_T], lam[i, LAM_T + 1], lam[i, LAM_T + 2]
-    _point_curvature(i, k_n, lx, ly, lz, fy, fz, qy, qz, hand, A)
+    _point_curvature(i, k_n, (lx, ly, lz), (fy, fz), (qy, qz), hand, A)
     l0 = R[0, 0] * lx + R[1, 0] * ly + R[2, 0] * lz
     l1 = R[0, 1] * lx + R[1, 1] * ly + R[2, 1] * lz
     l2 = R[0, 2] * lx + R[1, 2] * ly + R[2, 2] * lz
-    _object_point_curvature(k_n, l0, l1, l2, ax, ay, az, C)
+    _object_point_curvature((l0, l1, l2), (ax, ay, az), C)
     return e
 
 
 @njit(cache=True, _nrt=False)
-def rolled(th, seg, nrm, anc, p, R, hand, i, chain, ctx, vals, KO, RD):
-    """After a rolling solve, contact i's new pad normal (nrm[i], in D) and anchor (anc[i],
-    in O) where the pad now touches the primitive: the anchor is the contact on the object
-    less the stretch (`vals[i, 1:]`, palm), so that the next solve reads the same gap (the
-    same local centre) and the same stretch: the forces carry over."""
-    sphi, cphi, qy, qz = chain
+def rolled(x, body, hand, i, sc):
+    """After a rolling solve ending at x = (th, p, R), contact i's new pad normal
+    (body.nrm[i], in D) and anchor (body.anc[i], in O) where the pad now touches the
+    primitive: the anchor is the contact on the object less the stretch (`sc.vals[i, 1:]`,
+    palm), so that the next solve reads the same gap (the same local centre) and the same
+    stretch: the forces carry over. sc's chain is filled for finger i at x."""
+    th, p, R = x
+    seg, nrm, anc = body.seg, body.nrm, body.anc
+    ctx, vals, KO, RD = sc.ctx, sc.vals, sc.KO, sc.RD
+    sphi, cphi, qy, qz = sc.sphi, sc.cphi, sc.qy, sc.qz
     k_n = th.shape[1]
     r = hand.pad_r[i]
     kind = int(ctx[i, CTX_KIND])
-    kfx, kfy, kfz = distal_point(seg, i, k_n, sphi, cphi, qy, qz, hand.pad_xy[i, 0],
-                                 hand.pad_xy[i, 1], 0.0)
+    kfx, kfy, kfz = distal_point(seg, i, k_n, (sphi, cphi, qy, qz),
+                                 (hand.pad_xy[i, 0], hand.pad_xy[i, 1], 0.0))
     kx, ky, kz = to_palm(hand, i, kfx, kfy, kfz)
     vx, vy, vz = kx - p[0], ky - p[1], kz - p[2]
     kox = R[0, 0] * vx + R[1, 0] * vy + R[2, 0] * vz

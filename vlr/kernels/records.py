@@ -28,6 +28,14 @@ Hand = namedtuple("Hand", "base_pos base_rot radii rest lo hi link_mass link_com
 Particles = namedtuple("Particles", "theta seg nrm anc pos rot stiff kt mass com rho "
                                     "tangent spin valid")
 
+# A particle's iterate in a solve: the joint angles th (N, K), the POM's position p (3,)
+# and rotation R (3, 3); views of `Particles` at one index, or a trial point in `Scratch`.
+Pose = namedtuple("Pose", "th p R")
+
+# What a particle's Newton steps hold fixed, views of `Particles` at one index: seg, nrm,
+# anc, stiff, kt, mass, com, rho.
+Body = namedtuple("Body", "seg nrm anc stiff kt mass com rho")
+
 # The object's local surface (`vlr.surface.LocalSurface`): kind (SURF_*), radius [m], axis
 # (3,) a cylinder's in O, flat_radius: a contact radius at or above it is a plane.
 Surface = namedtuple("Surface", "kind radius axis flat_radius")
@@ -37,6 +45,27 @@ Settings = namedtuple("Settings", "kc klim tol_theta tol_pos max_step_theta max_
                                   "jump_theta jump_pos mu0 friction spin max_iter follow "
                                   "springs tendon limits link_gravity object_gravity "
                                   "contacts rolling")
+
+# What every particle's solve reads: the hand's constants (`Hand`), the object's surface
+# (`Surface`) and the solver's settings (`Settings`).
+Model = namedtuple("Model", "hand surface cfg")
+
+# What a batch of solves reports per particle (`vlr.kernels.solve.solve_batch`): status
+# (P,) int8 (OK ... INACTIVE), evals (P,) int32 the energy evaluations, followed (P,) bool
+# the follow-up in sub-steps was tried.
+Outcome = namedtuple("Outcome", "status evals followed")
+
+# One thread's buffers for a particle's solve (`vlr.kernels.solve.make_scratch`): the
+# arrow system's gradient gA (N, K), gC (6,) and Hessian blocks A, B, C with their
+# factors (Ainv, X, S, La) and the step (dth, dc, y); the finger chain's sines, cosines
+# and joint positions (sphi, cphi, qy, qz, `chain.finger_chain`); the contacts' work
+# arrays (jk ... MD); their constraints and rows (vals, jac); the multipliers (lam, lam0
+# at the start) and the solve's context (ctx, `CTX_*`); the start x0 (th0, p0, R0), a
+# trial point (tht, pt, Rt), a saved state for the follow-up (th_s ... R_s) and the
+# commands (u_from, u_to; u_b the solve's, du its change).
+Scratch = namedtuple("Scratch", "gA gC A B C Ainv X S La y dth dc sphi cphi qy qz jk dm jz t3 "
+                                "KO RD RD0 MO MD vals jac lam lam0 ctx th0 p0 R0 Rt tht pt "
+                                "th_s nrm_s anc_s p_s R_s u_from u_to u_b du")
 
 SURF_PLANE, SURF_SPHERE, SURF_CYLINDER = 0, 1, 2
 

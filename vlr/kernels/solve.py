@@ -18,8 +18,9 @@ u0 -> u1 then:
    near a fold or a stop, or a settle's start far from its equilibrium), each step held to
    a trust radius, the last accepted step's length (three times it after a step taken
    whole);
-5. a slipping contact whose normal force ended more than 2% (and 10 mN) off its held limit
-   is solved again from there with the limit updated, once;
+5. a slipping contact (or a pad spinning past its stick) whose normal force ended more
+   than 2% (and 10 mN) off its held limit is solved again from there with the limit
+   updated, up to `FRICTION_ROUNDS` times;
 6. moves the rolling contacts to where the pads now touch (`contacts.rolled`) and stores
    the new tangent.
 
@@ -34,7 +35,6 @@ evaluations, each with its arrow solve: a Newton-step equivalent.
 from __future__ import annotations
 
 import math
-from collections import namedtuple
 
 import numpy as np
 from numba import njit, prange
@@ -66,11 +66,11 @@ from vlr.kernels.records import (
     NO_CONVERGENCE,
     NONFINITE,
     OK,
+    Body,
+    Model,
+    Pose,
+    Scratch,
 )
-
-Scratch = namedtuple("Scratch", "gA gC A B C Ainv X S La y dth dc sphi cphi qy qz jk dm jz t3 "
-                                "KO RD RD0 MO MD vals jac lam lam0 ctx th0 p0 R0 Rt tht pt "
-                                "th_s nrm_s anc_s p_s R_s u_from u_to u_b du")
 
 
 @njit(cache=True)
@@ -127,40 +127,38 @@ def rotate(R, w0, w1, w2, out):
 
 
 @njit(cache=True, _nrt=False)
-def evaluate(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc):
-    """Energy of one particle at (th, p, R) (Eq. 6, 7, 8, the stops and gravity); its
-    gradient and Hessian into sc's arrow blocks, the contacts' constraints into sc.vals,
-    sc.jac. The rolling contacts read sc.ctx (their start) and sc.R0."""
-    n_f, k_n = th.shape
+def evaluate(x, body, hand, cfg, sc):
+    """Energy of one particle at x = (th, p, R) under the commands sc.u_b (Eq. 6, 7, 8, the
+    stops and gravity); its gradient and Hessian into sc's arrow blocks, the contacts'
+    constraints into sc.vals, sc.jac. The rolling contacts read sc.ctx (their start) and
+    sc.R0."""
+    th, seg = x.th, body.seg
+    n_f = th.shape[0]
     sc.gA[:] = 0.0
     sc.gC[:] = 0.0
     sc.A[:] = 0.0
     sc.B[:] = 0.0
     sc.C[:] = 0.0
-    chain = (sc.sphi, sc.cphi, sc.qy, sc.qz)
-    w = (sc.jk, sc.dm, sc.jz, sc.t3, sc.KO, sc.RD, sc.RD0, sc.MO, sc.MD)
     e = 0.0
     for i in range(n_f):
         finger_chain(th, seg, i, sc.sphi, sc.cphi, sc.qy, sc.qz)
-        e += hand_terms(th, stiff, kt, u, hand, cfg, i, sc.sphi, sc.cphi, sc.qy, sc.qz,
-                        sc.gA, sc.A)
+        e += hand_terms(th, body, hand, cfg, i, sc)
         if cfg.contacts:
             if cfg.rolling:
-                e += rolling(th, seg, p, R, sc.R0, hand, cfg, i, chain, sc.ctx, sc.lam,
-                             sc.vals, sc.jac, sc.gA, sc.gC, sc.A, sc.B, sc.C, w)
+                e += rolling(x, body, hand, cfg, i, sc)
                 if cfg.spin > 0.0:
-                    e += spin(th, R, sc.R0, hand, i, sc.ctx, sc.gA, sc.gC, sc.A, sc.B, sc.C)
+                    e += spin(x, hand, i, sc)
             else:
-                e += pinned(th, seg, nrm, anc, p, R, hand, cfg, i, chain, sc.lam, sc.vals,
-                            sc.jac, sc.gA, sc.gC, sc.A, sc.B, sc.C, sc.jk)
+                e += pinned(x, body, hand, cfg, i, sc)
     if cfg.object_gravity:
-        e += object_gravity(p, R, mass, com, hand, sc.gC, sc.C)
+        e += object_gravity(x.p, x.R, body.mass, body.com, hand, sc.gC, sc.C)
     return e
 
 
 @njit(cache=True, _nrt=False)
-def _start(th, seg, nrm, anc, p, R, rho, hand, srf, cfg, sc):
-    """The solve's start: x0 saved, each contact's context and its multipliers there."""
+def _start(x, body, hand, srf, cfg, sc):
+    """The solve's start x0 = x saved, each contact's context and its multipliers there."""
+    th, p, R = x
     n_f, k_n = th.shape
     for i in range(n_f):
         for k in range(k_n):
@@ -172,25 +170,25 @@ def _start(th, seg, nrm, anc, p, R, rho, hand, srf, cfg, sc):
     if not cfg.contacts:
         return
     for i in range(n_f):
-        finger_chain(th, seg, i, sc.sphi, sc.cphi, sc.qy, sc.qz)
+        finger_chain(th, body.seg, i, sc.sphi, sc.cphi, sc.qy, sc.qz)
         if cfg.rolling:
-            start_context(th, seg, nrm, anc, p, R, rho, hand, srf, cfg, i,
-                          (sc.sphi, sc.cphi, sc.qy, sc.qz), sc.ctx, sc.lam, sc.KO, sc.RD)
+            start_context(x, body, hand, srf, cfg, i, sc)
         else:
-            _pinned_offset(th, seg, nrm, anc, p, R, hand, cfg, i, sc)
+            _pinned_offset(x, body, hand, cfg, i, sc)
     for i in range(n_f):
         for a in range(N_LAM):
             sc.lam0[i, a] = sc.lam[i, a]
 
 
 @njit(cache=True, _nrt=False)
-def _pinned_offset(th, seg, nrm, anc, p, R, hand, cfg, i, sc):
-    """The pinned contact i's force at x0, k_c (x_D - (p + R a)), into sc.lam."""
-    k_n = th.shape[1]
+def _pinned_offset(x, body, hand, cfg, i, sc):
+    """The pinned contact i's force at x0 = x, k_c (x_D - (p + R a)), into sc.lam."""
+    th, p, R = x
+    seg, nrm, anc = body.seg, body.nrm, body.anc
     r = hand.pad_r[i]
-    fx, fy, fz = distal_point(seg, i, k_n, sc.sphi, sc.cphi, sc.qy, sc.qz,
-                              hand.pad_xy[i, 0] + r * nrm[i, 0],
-                              hand.pad_xy[i, 1] + r * nrm[i, 1], r * nrm[i, 2])
+    fx, fy, fz = distal_point(seg, i, th.shape[1], (sc.sphi, sc.cphi, sc.qy, sc.qz),
+                              (hand.pad_xy[i, 0] + r * nrm[i, 0],
+                               hand.pad_xy[i, 1] + r * nrm[i, 1], r * nrm[i, 2]))
     xx, xy, xz = to_palm(hand, i, fx, fy, fz)
     x = (xx, xy, xz)
     sc.lam[i, LAM_N] = 0.0
@@ -201,9 +199,12 @@ def _pinned_offset(th, seg, nrm, anc, p, R, hand, cfg, i, sc):
 
 
 @njit(cache=True, _nrt=False)
-def _predict(th, p, R, tangent, du, cfg, sc, n_f, k_n):
-    """x = x0 + S du, lambda = lambda0 + S_lam du (the stored tangent); returns the step's
-    size in tolerance units (inf: no tangent yet, all zeros)."""
+def _predict(x, tangent, cfg, sc):
+    """x = x0 + S du, lambda = lambda0 + S_lam du (the stored tangent, du = sc.du);
+    returns the step's size in tolerance units (inf: no tangent yet, all zeros)."""
+    th, p, R = x
+    du = sc.du
+    n_f, k_n = th.shape
     n_x = n_f * k_n + 6
     big_th = 0.0
     for i in range(n_f):
@@ -287,8 +288,10 @@ def _step_size(sc, cfg, n_f, k_n):
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def _take(th, p, R, sc, t, n_f, k_n):
+def _take(x, sc, t):
     """x <- x + t d (the rotation by R exp([t dw]x))."""
+    th, p, R = x
+    n_f, k_n = th.shape
     for i in range(n_f):
         for k in range(k_n):
             th[i, k] += t * sc.dth[i, k]
@@ -318,25 +321,27 @@ def _update_multipliers(cfg, sc, t, n_f, k_n):
 
 
 @njit(cache=True, _nrt=False)
-def _energy_at(th, p, R, t, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc, n_f, k_n):
+def _energy_at(x, t, body, hand, cfg, sc):
     """The energy (with its derivatives, into sc) at x + t d, the trial in sc.tht/pt/Rt."""
+    th, p, R = x
+    n_f, k_n = th.shape
     for i in range(n_f):
         for k in range(k_n):
             sc.tht[i, k] = th[i, k] + t * sc.dth[i, k]
     for a in range(3):
         sc.pt[a] = p[a] + t * sc.dc[a]
     rotate(R, t * sc.dc[3], t * sc.dc[4], t * sc.dc[5], sc.Rt)
-    return evaluate(sc.tht, sc.pt, sc.Rt, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg,
-                    sc)
+    return evaluate(Pose(sc.tht, sc.pt, sc.Rt), body, hand, cfg, sc)
 
 
 @njit(cache=True, _nrt=False)
-def newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc, max_iter,
-           prev):
-    """Primal-dual Newton from the current (th, p, R) at commands u (module docstring,
-    steps 2-4); returns (converged, evaluations). sc.lam holds the multipliers to start
-    from; `prev` is the size of the step that led here (the predictor's, in tolerance
-    units; inf: none). The last factorisation is left in sc (for the tangent)."""
+def newton(x, body, hand, cfg, sc, max_iter, prev):
+    """Primal-dual Newton from the current x = (th, p, R) at the commands sc.u_b (module
+    docstring, steps 2-4), in place; returns (converged, evaluations). sc.lam holds the
+    multipliers to start from; `prev` is the size of the step that led here (the
+    predictor's, in tolerance units; inf: none). The last factorisation is left in sc (for
+    the tangent)."""
+    th, p, R = x
     n_f, k_n = th.shape
     damped = False
     mu = cfg.mu0
@@ -345,7 +350,7 @@ def newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc, max_
     # step at the step limit and spend an evaluation on the trial it rejects.
     radius = math.inf
     evals = 0
-    e = evaluate(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc)
+    e = evaluate(x, body, hand, cfg, sc)
     evals += 1
     while evals <= max_iter:
         if not math.isfinite(e):
@@ -358,7 +363,7 @@ def newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc, max_
                 mu *= 10.0
                 if mu > 1e12:
                     return False, evals
-        solve(sc.gA, sc.gC, sc.B, sc.Ainv, sc.X, sc.S, sc.dth, sc.dc, sc.y)
+        solve(sc.gA, sc.gC, sc.B, (sc.Ainv, sc.X, sc.S), sc.dth, sc.dc, sc.y)
         size, t = _step_size(sc, cfg, n_f, k_n)
         if not math.isfinite(size):
             return False, evals
@@ -368,16 +373,16 @@ def newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc, max_
             continue
         if size * t <= 1.0:
             _update_multipliers(cfg, sc, t, n_f, k_n)
-            _take(th, p, R, sc, t, n_f, k_n)
+            _take(x, sc, t)
             return True, evals
         if not damped:
             _update_multipliers(cfg, sc, t, n_f, k_n)
-            _take(th, p, R, sc, t, n_f, k_n)
+            _take(x, sc, t)
             if (t == 1.0 and prev < math.inf and size < 0.1 * prev
                     and size ** 3 < 0.1 * prev * prev):
                 return True, evals
             prev = size
-            e = evaluate(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc)
+            e = evaluate(x, body, hand, cfg, sc)
             evals += 1
             continue
         # Damped: Levenberg-Marquardt with an Armijo line search on the energy.
@@ -395,8 +400,7 @@ def newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc, max_
         e_t = e
         tol_e = 1e-15 + 1e-13 * abs(e)
         for _ls in range(8):
-            e_t = _energy_at(th, p, R, t, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg,
-                             sc, n_f, k_n)
+            e_t = _energy_at(x, t, body, hand, cfg, sc)
             evals += 1
             if math.isfinite(e_t) and e_t <= e + 1e-4 * t * gd + tol_e:
                 accepted = True
@@ -428,17 +432,19 @@ def newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc, max_
             mu *= 10.0
             if mu > 1e12:
                 return False, evals
-            e = evaluate(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u, hand, cfg, sc)
+            e = evaluate(x, body, hand, cfg, sc)
             evals += 1
     return False, evals
 
 
 @njit(cache=True, _nrt=False)
-def _store_tangent(th, kt, tangent, hand, cfg, sc, n_f, k_n):
+def _store_tangent(x, body, tangent, hand, cfg, sc):
     """The equilibrium's tangent from the last factorisation: H dx/du_c = d(-grad)/du_c,
     nonzero on finger c's joints where its tendon is taut (k_t r_ck), and the multipliers'
     dlambda/du = k_c J dx/du (a sliding contact's tangential force follows its normal
     force along its direction)."""
+    th, kt = x.th, body.kt
+    n_f, k_n = th.shape
     n_x = n_f * k_n + 6
     nc = k_n + 6
     for c in range(n_f):
@@ -450,7 +456,7 @@ def _store_tangent(th, kt, tangent, hand, cfg, sc, n_f, k_n):
         if cfg.tendon and sc.u_b[c] - s > 0.0:
             for k in range(k_n):
                 sc.gA[c, k] = -kt[c] * hand.radii[c, k]
-        solve(sc.gA, sc.gC, sc.B, sc.Ainv, sc.X, sc.S, sc.dth, sc.dc, sc.y)
+        solve(sc.gA, sc.gC, sc.B, (sc.Ainv, sc.X, sc.S), sc.dth, sc.dc, sc.y)
         for i in range(n_f):
             for k in range(k_n):
                 tangent[i * k_n + k, c] = sc.dth[i, k]
@@ -477,14 +483,15 @@ def _store_tangent(th, kt, tangent, hand, cfg, sc, n_f, k_n):
 
 
 @njit(cache=True, _nrt=False)
-def solve_one(q, ps, hand, srf, cfg, u0, u1, predict, max_iter, sc):
+def solve_one(q, ps, model, u0, u1, predict, max_iter, sc):
     """Particle q from its equilibrium at u0 to its equilibrium at u1 (the module
     docstring's steps 1-6), in place; returns (status, evaluations)."""
-    th, seg, nrm, anc = ps.theta[q], ps.seg[q], ps.nrm[q], ps.anc[q]
-    p, R, stiff, kt = ps.pos[q], ps.rot[q], ps.stiff[q], ps.kt[q]
-    mass, com, rho, tangent = ps.mass[q], ps.com[q], ps.rho[q], ps.tangent[q]
+    hand, cfg = model.hand, model.cfg
+    x, body = _views(q, ps)
+    th, p, R = x
+    tangent = ps.tangent[q]
     n_f, k_n = th.shape
-    _start(th, seg, nrm, anc, p, R, rho, hand, srf, cfg, sc)
+    _start(x, body, hand, model.surface, cfg, sc)
     if cfg.spin > 0.0:
         for i in range(n_f):
             sc.ctx[i, CTX_PSI0] = ps.spin[q, i]
@@ -493,12 +500,11 @@ def solve_one(q, ps, hand, srf, cfg, u0, u1, predict, max_iter, sc):
         sc.u_b[c] = u1[c]
     prev = math.inf
     if predict:
-        prev = _predict(th, p, R, tangent, sc.du, cfg, sc, n_f, k_n)
+        prev = _predict(x, tangent, cfg, sc)
     rolling_friction = cfg.contacts and cfg.rolling
     if rolling_friction:
         _hold_friction(cfg, sc, n_f)
-    ok, evals = newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u1, hand, cfg, sc,
-                       max_iter, prev)
+    ok, evals = newton(x, body, hand, cfg, sc, max_iter, prev)
     if rolling_friction and (math.isfinite(cfg.friction) or cfg.spin > 0.0):
         # Active set of the cone: a stuck contact whose force left its cone slides from
         # here, with the limit at its normal force; a sliding one (or a spinning pad) whose
@@ -537,8 +543,7 @@ def solve_one(q, ps, hand, srf, cfg, u0, u1, predict, max_iter, sc):
                 if math.isfinite(cfg.friction) and math.isfinite(sc.ctx[i, CTX_CAP]):
                     _friction_force(sc.lam, i, cfg.kc, cfg.friction, sc.ctx[i, CTX_CAP],
                                     sc.KO)
-            ok, more = newton(th, p, R, seg, nrm, anc, stiff, kt, mass, com, u1, hand, cfg,
-                              sc, max_iter, math.inf)
+            ok, more = newton(x, body, hand, cfg, sc, max_iter, math.inf)
             evals += more
     big = 0.0
     for i in range(n_f):
@@ -551,7 +556,7 @@ def solve_one(q, ps, hand, srf, cfg, u0, u1, predict, max_iter, sc):
         return NO_CONVERGENCE, evals
     if big > cfg.jump_theta or dp > cfg.jump_pos:
         return JUMP, evals
-    _store_tangent(th, kt, tangent, hand, cfg, sc, n_f, k_n)
+    _store_tangent(x, body, tangent, hand, cfg, sc)
     if rolling_friction and cfg.spin > 0.0:
         for i in range(n_f):
             ps.spin[q, i] = carried_spin(th, R, sc.R0, hand, i, sc.ctx)
@@ -560,10 +565,17 @@ def solve_one(q, ps, hand, srf, cfg, u0, u1, predict, max_iter, sc):
         # contact's force now (`contacts.friction` inverted; the stick's lambda / k_c).
         for i in range(n_f):
             _carried_stretch(sc, i, cfg)
-            finger_chain(th, seg, i, sc.sphi, sc.cphi, sc.qy, sc.qz)
-            rolled(th, seg, nrm, anc, p, R, hand, i, (sc.sphi, sc.cphi, sc.qy, sc.qz),
-                   sc.ctx, sc.vals, sc.KO, sc.RD)
+            finger_chain(th, body.seg, i, sc.sphi, sc.cphi, sc.qy, sc.qz)
+            rolled(x, body, hand, i, sc)
     return OK, evals
+
+
+@njit(cache=True, inline="always", _nrt=False)
+def _views(q, ps):
+    """Particle q's iterate and what its Newton steps hold fixed, as views of ps."""
+    return (Pose(ps.theta[q], ps.pos[q], ps.rot[q]),
+            Body(ps.seg[q], ps.nrm[q], ps.anc[q], ps.stiff[q], ps.kt[q], ps.mass[q],
+                 ps.com[q], ps.rho[q]))
 
 
 @njit(cache=True, _nrt=False)
@@ -618,14 +630,14 @@ def _restore(q, ps, sc):
 
 
 @njit(cache=True, _nrt=False)
-def solve_path(q, ps, hand, srf, cfg, u0, u1, predict, sc):
+def solve_path(q, ps, model, u0, u1, predict, sc):
     """`solve_one`, and on a jump or no convergence the follow-up from the start in
     cfg.follow equal steps at twice the iterations. Returns (status (the first attempt's
     if the follow-up fails too), evaluations, followed)."""
-    follow = cfg.follow
+    follow = model.cfg.follow
     if follow > 1:
         _save(q, ps, sc)
-    st, evals = solve_one(q, ps, hand, srf, cfg, u0, u1, predict, cfg.max_iter, sc)
+    st, evals = solve_one(q, ps, model, u0, u1, predict, model.cfg.max_iter, sc)
     if follow <= 1 or not (st == JUMP or st == NO_CONVERGENCE):
         return st, evals, False
     _restore(q, ps, sc)
@@ -634,8 +646,8 @@ def solve_path(q, ps, hand, srf, cfg, u0, u1, predict, sc):
         for c in range(n_f):
             sc.u_from[c] = u0[c] + (u1[c] - u0[c]) * ((j - 1) / follow)
             sc.u_to[c] = u0[c] + (u1[c] - u0[c]) * (j / follow)
-        st2, more = solve_one(q, ps, hand, srf, cfg, sc.u_from, sc.u_to, predict,
-                              2 * cfg.max_iter, sc)
+        st2, more = solve_one(q, ps, model, sc.u_from, sc.u_to, predict,
+                              2 * model.cfg.max_iter, sc)
         evals += more
         if st2 != OK:
             return st, evals, True
@@ -643,16 +655,20 @@ def solve_path(q, ps, hand, srf, cfg, u0, u1, predict, sc):
 
 
 @njit(parallel=True, cache=True)
-def solve_batch(ps, hand, srf, cfg, u0, u1, predict, status, evals, followed):
+def solve_batch(ps, hand, srf, cfg, u0, u1, predict, out):
     """Every valid particle from its equilibrium at u0 to its equilibrium at u1
-    (`solve_path`), in place: the state, ps.valid (False after a failure), status,
-    evals (evaluations) and followed (the follow-up was tried)."""
+    (`solve_path`), in place: the state, ps.valid (False after a failure) and `out`
+    (`records.Outcome`: each particle's status, evaluations and whether the follow-up was
+    tried). The hand, surface and settings come apart: a record of records does not pass
+    into a prange body (numba 0.68), its parts do."""
     n_p, n_f, k_n = ps.theta.shape
     n_chunks = min(n_p, 64)
     # A write into a record's array in a prange body is lost (numba 0.68: the parfor
     # copies the attribute); through a name of its own it is not.
     valid = ps.valid
+    status, evals, followed = out.status, out.evals, out.followed
     for ch in prange(n_chunks):
+        model = Model(hand, srf, cfg)
         sc = make_scratch(n_f, k_n)
         for q in range(ch * n_p // n_chunks, (ch + 1) * n_p // n_chunks):
             followed[q] = False
@@ -660,7 +676,7 @@ def solve_batch(ps, hand, srf, cfg, u0, u1, predict, status, evals, followed):
                 status[q] = INACTIVE
                 evals[q] = 0
                 continue
-            st, ev, fo = solve_path(q, ps, hand, srf, cfg, u0, u1, predict, sc)
+            st, ev, fo = solve_path(q, ps, model, u0, u1, predict, sc)
             status[q] = st
             evals[q] = ev
             followed[q] = fo
@@ -668,16 +684,17 @@ def solve_batch(ps, hand, srf, cfg, u0, u1, predict, status, evals, followed):
 
 
 @njit(cache=True)
-def evaluate_at(q, ps, hand, srf, cfg, th, p, R, u, lam, gA, gC, A, B, C, vals, jac):
-    """Particle q's energy at (th, p, R) from its start (its own state, x0): into gA, gC,
-    A, B, C its gradient and Hessian blocks, into vals, jac its contacts' constraints and
-    rows. lam (N, N_LAM): the multipliers the Hessian's curvature terms weigh; NaN: the
-    start's. The pads' friction limit is held at the start's normal force. For tests and
-    diagnostics."""
-    n_f, k_n = th.shape
+def evaluate_at(q, ps, model, x, u, lam):
+    """Particle q's energy at x = (th, p, R) under the commands u, from its start (its own
+    state, x0); returns (energy, the scratch: its gradient and Hessian blocks gA, gC, A, B,
+    C, its contacts' constraints and rows vals, jac). lam (N, N_LAM): the multipliers the
+    Hessian's curvature terms weigh; NaN: the start's. The pads' friction limit is held at
+    the start's normal force. For tests and diagnostics."""
+    hand, cfg = model.hand, model.cfg
+    n_f, k_n = x.th.shape
     sc = make_scratch(n_f, k_n)
-    _start(ps.theta[q], ps.seg[q], ps.nrm[q], ps.anc[q], ps.pos[q], ps.rot[q], ps.rho[q],
-           hand, srf, cfg, sc)
+    x0, body = _views(q, ps)
+    _start(x0, body, hand, model.surface, cfg, sc)
     if cfg.contacts and cfg.rolling:
         _hold_friction(cfg, sc, n_f)
         for i in range(n_f):
@@ -686,16 +703,9 @@ def evaluate_at(q, ps, hand, srf, cfg, th, p, R, u, lam, gA, gC, A, B, C, vals, 
         for a in range(N_LAM):
             if not math.isnan(lam[i, a]):
                 sc.lam[i, a] = lam[i, a]
-    e = evaluate(th, p, R, ps.seg[q], ps.nrm[q], ps.anc[q], ps.stiff[q], ps.kt[q],
-                 ps.mass[q], ps.com[q], u, hand, cfg, sc)
-    gA[:] = sc.gA
-    gC[:] = sc.gC
-    A[:] = sc.A
-    B[:] = sc.B
-    C[:] = sc.C
-    vals[:] = sc.vals
-    jac[:] = sc.jac
-    return e
+    for c in range(n_f):
+        sc.u_b[c] = u[c]
+    return evaluate(x, body, hand, cfg, sc), sc
 
 
 @njit(parallel=True, cache=True)
@@ -706,8 +716,15 @@ def evaluate_batch(ps, hand, srf, cfg, u, energy):
     n_chunks = min(n_p, 64)
     for ch in prange(n_chunks):
         sc = make_scratch(n_f, k_n)
+        for c in range(n_f):
+            sc.u_b[c] = u[c]
         for q in range(ch * n_p // n_chunks, (ch + 1) * n_p // n_chunks):
-            th, p, R = ps.theta[q], ps.pos[q], ps.rot[q]
-            _start(th, ps.seg[q], ps.nrm[q], ps.anc[q], p, R, ps.rho[q], hand, srf, cfg, sc)
-            energy[q] = evaluate(th, p, R, ps.seg[q], ps.nrm[q], ps.anc[q], ps.stiff[q],
-                                 ps.kt[q], ps.mass[q], ps.com[q], u, hand, cfg, sc)
+            energy[q] = _evaluate_own(q, ps, Model(hand, srf, cfg), sc)
+
+
+@njit(cache=True, _nrt=False)
+def _evaluate_own(q, ps, model, sc):
+    """Particle q's energy (its derivatives into sc) at its own state, its solve's start."""
+    x, body = _views(q, ps)
+    _start(x, body, model.hand, model.surface, model.cfg, sc)
+    return evaluate(x, body, model.hand, model.cfg, sc)
