@@ -285,15 +285,14 @@ def test_failed_solve_is_flagged_not_nan(modelo):
     assert np.isneginf(ll[1]) and np.isneginf(ll[2]) and np.isfinite(ll[0])
 
 
-def test_three_joint_two_finger_pinch():
-    ch = Chain(lengths=(0.04, 0.03), pad_center=(0.0, 0.003, 0.025), pad_radius=0.01,
-               pulley_radii=(0.008, 0.006, 0.005), stiffness=(0.04, 0.03, 0.02),
-               rest_angles=(-0.7, -0.6, -0.5), limits=((-0.35, 1.7), (0.0, 1.4), (0.0, 1.2)),
-               link_masses=(0.015, 0.012, 0.01),
-               link_coms=((0, 0, 0.02), (0, 0, 0.015), (0, 0, 0.012)))
+def test_two_finger_pinch():
+    ch = Chain(lengths=(0.04,), pad_center=(0.0, 0.003, 0.025), pad_radius=0.01,
+               pulley_radii=(0.008, 0.006), stiffness=(0.04, 0.03),
+               rest_angles=(-0.7, -0.6), limits=((-0.35, 1.7), (0.0, 1.4)),
+               link_masses=(0.015, 0.012), link_coms=((0, 0, 0.02), (0, 0, 0.015)))
     model = HandModel.from_chains(("a", "b"), (ch, ch), [[0, -0.03, 0.01], [0, 0.03, 0.01]],
                                   [math.pi / 2, -math.pi / 2], 2e4)
-    mm, st, u0 = grasp(model, n=2, theta=(0.1, 0.4, 0.4), config=PIN)
+    mm, st, u0 = grasp(model, n=2, theta=(0.3, 0.6), config=PIN)
     _, g, _ = mm.evaluate(st, 0, u0)
     # At equilibrium: residual forces and torques under 0.1 mN (m), where the solve's step
     # tolerance leaves 0.03 mN.
@@ -301,6 +300,18 @@ def test_three_joint_two_finger_pinch():
     status, _ = mm.solve(st, u0 + np.array([2e-4, -2e-4]))
     assert np.all(status == 0)
     assert np.all(np.isfinite(st.theta))
+
+
+def test_a_three_joint_finger_is_refused_by_name():
+    ch = Chain(lengths=(0.04, 0.03), pad_center=(0.0, 0.003, 0.025), pad_radius=0.01,
+               pulley_radii=(0.008, 0.006, 0.005), stiffness=(0.04, 0.03, 0.02),
+               rest_angles=(-0.7, -0.6, -0.5), limits=((-0.35, 1.7), (0.0, 1.4), (0.0, 1.2)),
+               link_masses=(0.015, 0.012, 0.01),
+               link_coms=((0, 0, 0.02), (0, 0, 0.015), (0, 0, 0.012)))
+    model = HandModel.from_chains(("a", "b"), (ch, ch), [[0, -0.03, 0.01], [0, 0.03, 0.01]],
+                                  [math.pi / 2, -math.pi / 2], 2e4)
+    with pytest.raises(ValueError, match="fingers of 2 joints.*have 3"):
+        MotionModel(model, OBJ, PIN)
 
 
 def test_a_jittered_contact_on_a_cylinder_starts_at_its_own_gap(modelo):

@@ -375,6 +375,10 @@ class MotionModel:
 
     def __init__(self, model: HandModel, obj: ObjectParams,
                  config: MotionConfig | None = None) -> None:
+        if model.n_joints != rec.JOINTS:
+            raise ValueError(f"the motion kernels model fingers of {rec.JOINTS} joints "
+                             f"(vlr.kernels.records.JOINTS); this hand's have "
+                             f"{model.n_joints}")
         self.model = model
         self.obj = obj
         self.config = config or MotionConfig()

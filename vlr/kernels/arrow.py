@@ -14,6 +14,8 @@ import math
 
 from numba import njit
 
+from vlr.kernels.records import JOINTS
+
 
 @njit(cache=True, _nrt=False)
 def cholesky(M, n):
@@ -55,7 +57,7 @@ def factor(A, B, C, damping, Ainv, X, S, La):
     damping is free of radians and metres): Ainv (N, K, K) the finger blocks' inverses,
     X (N, K, 6) = Ainv B, S (6, 6) the Schur complement's Cholesky factor; La (K, K)
     scratch. False if a block is not positive definite."""
-    n_f, k_n = A.shape[0], A.shape[1]
+    n_f, k_n = A.shape[0], JOINTS
     for a in range(6):
         for b in range(6):
             S[a, b] = C[a, b]
@@ -121,7 +123,7 @@ def solve(gA, gC, B, fac, dth, dc, y):
     """The Newton step H d = -g from a factorisation (`factor`'s Ainv, X, S, as `fac`):
     dth (N, K), dc (6,); y (N, K) scratch."""
     Ainv, X, S = fac
-    n_f, k_n = gA.shape
+    n_f, k_n = gA.shape[0], JOINTS
     for a in range(6):
         dc[a] = -gC[a]
     for i in range(n_f):

@@ -15,13 +15,14 @@ import math
 import numpy as np
 from numba import njit, prange
 
+from vlr.kernels.records import JOINTS
+
 
 @njit(cache=True, inline="always", _nrt=False)
-def finger_chain(th, seg, i, sphi, cphi, qy, qz):
-    """Finger i's chain in F (Eq. 2): sphi, cphi (K,) the sines and cosines of the
-    cumulative angles, qy, qz (K,) the joints' positions; returns the summed angle phi.
-    th, seg (N, K) are one particle's."""
-    k_n = th.shape[1]
+def finger_chain(th, seg, i, k_n, sphi, cphi, qy, qz):
+    """Finger i's chain of k_n joints in F (Eq. 2): sphi, cphi (K,) the sines and cosines
+    of the cumulative angles, qy, qz (K,) the joints' positions; returns the summed angle
+    phi. th, seg (N, K) are one particle's."""
     phi = 0.0
     qy[0] = 0.0
     qz[0] = 0.0
@@ -75,7 +76,7 @@ def hand_terms(th, body, hand, cfg, i, sc):
     (`finger_chain`, into sc) must be filled."""
     stiff, kt, u = body.stiff, body.kt, sc.u_b
     sphi, cphi, qy, qz, gA, A = sc.sphi, sc.cphi, sc.qy, sc.qz, sc.gA, sc.A
-    k_n = th.shape[1]
+    k_n = JOINTS
     e = 0.0
     if cfg.springs:
         for k in range(k_n):
@@ -176,7 +177,7 @@ def contact_points_batch(theta, seg, nrm, hand, out):
         for q in range((ch * n_p) // n_chunks, ((ch + 1) * n_p) // n_chunks):
             th, sg, nr = theta[q], seg[q], nrm[q]
             for i in range(n_f):
-                finger_chain(th, sg, i, sphi, cphi, qy, qz)
+                finger_chain(th, sg, i, k_n, sphi, cphi, qy, qz)
                 r = hand.pad_r[i]
                 fx, fy, fz = distal_point(sg, i, k_n, (sphi, cphi, qy, qz),
                                           (hand.pad_xy[i, 0] + r * nr[i, 0],

@@ -59,6 +59,7 @@ from vlr.kernels.records import (
     CTX_RHO,
     CTX_SPIN,
     CTX_T0,
+    JOINTS,
     LAM_N,
     LAM_T,
     SURF_CYLINDER,
@@ -105,7 +106,7 @@ def start_context(x, body, hand, srf, cfg, i, sc):
     seg, nrm, anc, rho = body.seg, body.nrm, body.anc, body.rho
     sphi, cphi, qy, qz = sc.sphi, sc.cphi, sc.qy, sc.qz
     ctx, lam, KO, RD = sc.ctx, sc.lam, sc.KO, sc.RD
-    k_n = th.shape[1]
+    k_n = JOINTS
     r = hand.pad_r[i]
     kfx, kfy, kfz = distal_point(seg, i, k_n, (sphi, cphi, qy, qz),
                                  (hand.pad_xy[i, 0], hand.pad_xy[i, 1], 0.0))
@@ -226,21 +227,19 @@ def _k_object(hand, i, k_n, kf, ko, R, q, jk):
 
 
 @njit(cache=True, inline="always", _nrt=False)
-def _add_block(i, k_n, Jl, Gl, Jr, blocks):
-    """Add Jl^T Gl Jr (Gl (3, 3)) into the arrow blocks (A, B, C) of finger i (the columns
-    of Jl, Jr: theta_i (K), then the object's 6)."""
+def _add_block(i, k_n, J, G, GJ, blocks):
+    """Add J^T G J (G (3, 3) symmetric) into the arrow blocks (A, B, C) of finger i (the
+    columns of J: theta_i (K), then the object's 6); GJ (3, K + 6) scratch, G J formed once
+    rather than for every pair of columns."""
     A, B, C = blocks
-    rows = 3
     nc = k_n + 6
+    for a in range(3):
+        for c in range(nc):
+            GJ[a, c] = G[a, 0] * J[0, c] + G[a, 1] * J[1, c] + G[a, 2] * J[2, c]
     for c1 in range(nc):
+        j0, j1, j2 = J[0, c1], J[1, c1], J[2, c1]
         for c2 in range(c1, nc):
-            t = 0.0
-            for a in range(rows):
-                ga = 0.0
-                for b in range(rows):
-                    ga += Gl[a, b] * Jr[b, c2]
-                t += Jl[a, c1] * ga
-            _put(i, k_n, c1, c2, t, A, B, C)
+            _put(i, k_n, c1, c2, j0 * GJ[0, c2] + j1 * GJ[1, c2] + j2 * GJ[2, c2], A, B, C)
 
 
 @njit(cache=True, inline="always", _nrt=False)
@@ -343,7 +342,7 @@ def rolling(x, body, hand, cfg, i, sc):
     sphi, cphi, qy, qz = sc.sphi, sc.cphi, sc.qy, sc.qz
     jk, dm, jz, t3, KO, RD, RD0, MO, MD = (sc.jk, sc.dm, sc.jz, sc.t3, sc.KO, sc.RD, sc.RD0,
                                            sc.MO, sc.MD)
-    k_n = th.shape[1]
+    k_n = JOINTS
     nc = k_n + 6
     kc = cfg.kc
     r = hand.pad_r[i]
@@ -493,7 +492,7 @@ def rolling(x, body, hand, cfg, i, sc):
             gA[i, c] += gr
         else:
             gC[c - k_n] += gr
-    _add_block(i, k_n, jz, G, jz, (A, B, C))
+    _add_block(i, k_n, jz, G, sc.gj, (A, B, C))
     # The constraints' curvature weighted by the multipliers (sigma, lambda): exact. With
     # mu_O = MO^T lambda, nu = lambda + Q lambda (Q = RD RD0^T), nu' = R^T nu, lambda' =
     # R^T lambda:  lambda . s = mu_O . c_O(k_O) + r/2 nu . R m(k_O) + r/2 lambda . RD n_D0
@@ -527,7 +526,7 @@ def rolling(x, body, hand, cfg, i, sc):
             gam1 = v
         else:
             gam2 = v
-    _add_block(i, k_n, jk, G, jk, (A, B, C))
+    _add_block(i, k_n, jk, G, sc.gj, (A, B, C))
     _k_curvature(i, k_n, (gam0, gam1, gam2), (kfy, kfz), (kox, koy, koz), R, hand, sc)
     # R's own turn: 1/2 lambda' . d2(exp) (c_O - c_O0) + r/2 nu' . d2(exp) m
     _rotation_curvature(0.5, lp, (dox, doy, doz), C)
@@ -614,7 +613,7 @@ def spin(x, hand, i, sc):
     th, _, R = x
     R0, ctx, gA, gC, A, B, C = sc.R0, sc.ctx, sc.gA, sc.gC, sc.A, sc.B, sc.C
     cap = ctx[i, CTX_SPIN]
-    k_n = th.shape[1]
+    k_n = JOINTS
     n0x, n0y, n0z = ctx[i, CTX_N0], ctx[i, CTX_N0 + 1], ctx[i, CTX_N0 + 2]
     rb = hand.base_rot
     cw = -(n0x * rb[i, 0, 0] + n0y * rb[i, 1, 0] + n0z * rb[i, 2, 0])  # n0 . om
@@ -692,7 +691,7 @@ def carried_spin(th, R, R0, hand, i, ctx):
 @njit(cache=True, inline="always", _nrt=False)
 def spin_angle(th, R, R0, hand, i, ctx):
     """Pad i's spin psi at the iterate (`spin`'s), the carried one included [rad]."""
-    k_n = th.shape[1]
+    k_n = JOINTS
     n0x, n0y, n0z = ctx[i, CTX_N0], ctx[i, CTX_N0 + 1], ctx[i, CTX_N0 + 2]
     rb = hand.base_rot
     cw = -(n0x * rb[i, 0, 0] + n0y * rb[i, 1, 0] + n0z * rb[i, 2, 0])
@@ -834,7 +833,7 @@ def pinned(x, body, hand, cfg, i, sc):
     lam, vals, jac, jv = sc.lam, sc.vals, sc.jac, sc.jk
     gA, gC, A, B, C = sc.gA, sc.gC, sc.A, sc.B, sc.C
     sphi, cphi, qy, qz = sc.sphi, sc.cphi, sc.qy, sc.qz
-    k_n = th.shape[1]
+    k_n = JOINTS
     nc = k_n + 6
     kc = cfg.kc
     r = hand.pad_r[i]
@@ -897,7 +896,7 @@ def rolled(x, body, hand, i, sc):
     seg, nrm, anc = body.seg, body.nrm, body.anc
     ctx, vals, KO, RD = sc.ctx, sc.vals, sc.KO, sc.RD
     sphi, cphi, qy, qz = sc.sphi, sc.cphi, sc.qy, sc.qz
-    k_n = th.shape[1]
+    k_n = JOINTS
     r = hand.pad_r[i]
     kind = int(ctx[i, CTX_KIND])
     kfx, kfy, kfz = distal_point(seg, i, k_n, (sphi, cphi, qy, qz),

@@ -63,9 +63,16 @@ Outcome = namedtuple("Outcome", "status evals followed")
 # at the start) and the solve's context (ctx, `CTX_*`); the start x0 (th0, p0, R0), a
 # trial point (tht, pt, Rt), a saved state for the follow-up (th_s ... R_s) and the
 # commands (u_from, u_to; u_b the solve's, du its change).
-Scratch = namedtuple("Scratch", "gA gC A B C Ainv X S La y dth dc sphi cphi qy qz jk dm jz t3 "
+Scratch = namedtuple("Scratch", "gA gC A B C Ainv X S La y dth dc sphi cphi qy qz jk dm jz t3 gj "
                                 "KO RD RD0 MO MD vals jac lam lam0 ctx th0 p0 R0 Rt tht pt "
                                 "th_s nrm_s anc_s p_s R_s u_from u_to u_b du")
+
+# The joints of a finger in the motion kernels: the Model O's two, every `FingerSpec`'s. A
+# count known when the kernels compile lets LLVM unroll their loops over a finger's joints
+# (and the 8 columns of a finger's block); read from the arrays' shapes it cost 18% of an
+# energy evaluation and 26% of an arrow solve (docs/DECISIONS.md). The fingers' count stays
+# the arrays'.
+JOINTS = 2
 
 SURF_PLANE, SURF_SPHERE, SURF_CYLINDER = 0, 1, 2
 

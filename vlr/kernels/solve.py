@@ -58,6 +58,7 @@ from vlr.kernels.records import (
     CTX_PSI0,
     CTX_SPIN,
     INACTIVE,
+    JOINTS,
     JUMP,
     LAM_N,
     LAM_T,
@@ -84,8 +85,8 @@ def make_scratch(n_f, k_n):
                    np.empty((n_f, k_n)), np.empty((n_f, k_n)), np.empty(6),
                    np.empty(k_n), np.empty(k_n), np.empty(k_n), np.empty(k_n),
                    np.empty((3, nc)), np.empty((3, nc)), np.empty((3, nc)),
-                   np.empty((3, nc)), np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)),
-                   np.empty((3, 3)), np.empty((3, 3)), np.empty((n_f, 4)),
+                   np.empty((3, nc)), np.empty((3, nc)), np.empty((3, 3)), np.empty((3, 3)),
+                   np.empty((3, 3)), np.empty((3, 3)), np.empty((3, 3)), np.empty((n_f, 4)),
                    np.empty((n_f, 4, nc)), np.empty((n_f, N_LAM)),
                    np.empty((n_f, N_LAM)), np.empty((n_f, N_CTX)),
                    np.empty((n_f, k_n)), np.empty(3), np.empty((3, 3)), np.empty((3, 3)),
@@ -141,7 +142,7 @@ def evaluate(x, body, hand, cfg, sc):
     sc.C[:] = 0.0
     e = 0.0
     for i in range(n_f):
-        finger_chain(th, seg, i, sc.sphi, sc.cphi, sc.qy, sc.qz)
+        finger_chain(th, seg, i, JOINTS, sc.sphi, sc.cphi, sc.qy, sc.qz)
         e += hand_terms(th, body, hand, cfg, i, sc)
         if cfg.contacts:
             if cfg.rolling:
@@ -159,7 +160,7 @@ def evaluate(x, body, hand, cfg, sc):
 def _start(x, body, hand, srf, cfg, sc):
     """The solve's start x0 = x saved, each contact's context and its multipliers there."""
     th, p, R = x
-    n_f, k_n = th.shape
+    n_f, k_n = th.shape[0], JOINTS
     for i in range(n_f):
         for k in range(k_n):
             sc.th0[i, k] = th[i, k]
@@ -170,7 +171,7 @@ def _start(x, body, hand, srf, cfg, sc):
     if not cfg.contacts:
         return
     for i in range(n_f):
-        finger_chain(th, body.seg, i, sc.sphi, sc.cphi, sc.qy, sc.qz)
+        finger_chain(th, body.seg, i, JOINTS, sc.sphi, sc.cphi, sc.qy, sc.qz)
         if cfg.rolling:
             start_context(x, body, hand, srf, cfg, i, sc)
         else:
@@ -186,7 +187,7 @@ def _pinned_offset(x, body, hand, cfg, i, sc):
     th, p, R = x
     seg, nrm, anc = body.seg, body.nrm, body.anc
     r = hand.pad_r[i]
-    fx, fy, fz = distal_point(seg, i, th.shape[1], (sc.sphi, sc.cphi, sc.qy, sc.qz),
+    fx, fy, fz = distal_point(seg, i, JOINTS, (sc.sphi, sc.cphi, sc.qy, sc.qz),
                               (hand.pad_xy[i, 0] + r * nrm[i, 0],
                                hand.pad_xy[i, 1] + r * nrm[i, 1], r * nrm[i, 2]))
     xx, xy, xz = to_palm(hand, i, fx, fy, fz)
@@ -204,7 +205,7 @@ def _predict(x, tangent, cfg, sc):
     returns the step's size in tolerance units (inf: no tangent yet, all zeros)."""
     th, p, R = x
     du = sc.du
-    n_f, k_n = th.shape
+    n_f, k_n = th.shape[0], JOINTS
     n_x = n_f * k_n + 6
     big_th = 0.0
     for i in range(n_f):
@@ -291,7 +292,7 @@ def _step_size(sc, cfg, n_f, k_n):
 def _take(x, sc, t):
     """x <- x + t d (the rotation by R exp([t dw]x))."""
     th, p, R = x
-    n_f, k_n = th.shape
+    n_f, k_n = th.shape[0], JOINTS
     for i in range(n_f):
         for k in range(k_n):
             th[i, k] += t * sc.dth[i, k]
@@ -324,7 +325,7 @@ def _update_multipliers(cfg, sc, t, n_f, k_n):
 def _energy_at(x, t, body, hand, cfg, sc):
     """The energy (with its derivatives, into sc) at x + t d, the trial in sc.tht/pt/Rt."""
     th, p, R = x
-    n_f, k_n = th.shape
+    n_f, k_n = th.shape[0], JOINTS
     for i in range(n_f):
         for k in range(k_n):
             sc.tht[i, k] = th[i, k] + t * sc.dth[i, k]
@@ -342,7 +343,7 @@ def newton(x, body, hand, cfg, sc, max_iter, prev):
     predictor's, in tolerance units; inf: none). The last factorisation is left in sc (for
     the tangent)."""
     th, p, R = x
-    n_f, k_n = th.shape
+    n_f, k_n = th.shape[0], JOINTS
     damped = False
     mu = cfg.mu0
     # The damped steps' trust radius (tolerance units): the last accepted step's length,
@@ -444,7 +445,7 @@ def _store_tangent(x, body, tangent, hand, cfg, sc):
     dlambda/du = k_c J dx/du (a sliding contact's tangential force follows its normal
     force along its direction)."""
     th, kt = x.th, body.kt
-    n_f, k_n = th.shape
+    n_f, k_n = th.shape[0], JOINTS
     n_x = n_f * k_n + 6
     nc = k_n + 6
     for c in range(n_f):
@@ -490,7 +491,7 @@ def solve_one(q, ps, model, u0, u1, predict, max_iter, sc):
     x, body = _views(q, ps)
     th, p, R = x
     tangent = ps.tangent[q]
-    n_f, k_n = th.shape
+    n_f, k_n = th.shape[0], JOINTS
     _start(x, body, hand, model.surface, cfg, sc)
     if cfg.spin > 0.0:
         for i in range(n_f):
@@ -565,7 +566,7 @@ def solve_one(q, ps, model, u0, u1, predict, max_iter, sc):
         # contact's force now (`contacts.friction` inverted; the stick's lambda / k_c).
         for i in range(n_f):
             _carried_stretch(sc, i, cfg)
-            finger_chain(th, body.seg, i, sc.sphi, sc.cphi, sc.qy, sc.qz)
+            finger_chain(th, body.seg, i, JOINTS, sc.sphi, sc.cphi, sc.qy, sc.qz)
             rolled(x, body, hand, i, sc)
     return OK, evals
 
@@ -600,7 +601,7 @@ def _carried_stretch(sc, i, cfg):
 @njit(cache=True, _nrt=False)
 def _save(q, ps, sc):
     th, nrm, anc, p, R = ps.theta[q], ps.nrm[q], ps.anc[q], ps.pos[q], ps.rot[q]
-    n_f, k_n = th.shape
+    n_f, k_n = th.shape[0], JOINTS
     for i in range(n_f):
         for k in range(k_n):
             sc.th_s[i, k] = th[i, k]
@@ -616,7 +617,7 @@ def _save(q, ps, sc):
 @njit(cache=True, _nrt=False)
 def _restore(q, ps, sc):
     th, nrm, anc, p, R = ps.theta[q], ps.nrm[q], ps.anc[q], ps.pos[q], ps.rot[q]
-    n_f, k_n = th.shape
+    n_f, k_n = th.shape[0], JOINTS
     for i in range(n_f):
         for k in range(k_n):
             th[i, k] = sc.th_s[i, k]
@@ -661,7 +662,8 @@ def solve_batch(ps, hand, srf, cfg, u0, u1, predict, out):
     (`records.Outcome`: each particle's status, evaluations and whether the follow-up was
     tried). The hand, surface and settings come apart: a record of records does not pass
     into a prange body (numba 0.68), its parts do."""
-    n_p, n_f, k_n = ps.theta.shape
+    n_p, n_f = ps.theta.shape[0], ps.theta.shape[1]
+    k_n = JOINTS
     n_chunks = min(n_p, 64)
     # A write into a record's array in a prange body is lost (numba 0.68: the parfor
     # copies the attribute); through a name of its own it is not.
@@ -691,7 +693,7 @@ def evaluate_at(q, ps, model, x, u, lam):
     Hessian's curvature terms weigh; NaN: the start's. The pads' friction limit is held at
     the start's normal force. For tests and diagnostics."""
     hand, cfg = model.hand, model.cfg
-    n_f, k_n = x.th.shape
+    n_f, k_n = x.th.shape[0], JOINTS
     sc = make_scratch(n_f, k_n)
     x0, body = _views(q, ps)
     _start(x0, body, hand, model.surface, cfg, sc)
@@ -712,7 +714,8 @@ def evaluate_at(q, ps, model, x, u, lam):
 def evaluate_batch(ps, hand, srf, cfg, u, energy):
     """Every particle's energy, gradient and Hessian at its own state (energies into
     `energy`): one Newton step's evaluation, for `vlr bench --profile`."""
-    n_p, n_f, k_n = ps.theta.shape
+    n_p, n_f = ps.theta.shape[0], ps.theta.shape[1]
+    k_n = JOINTS
     n_chunks = min(n_p, 64)
     for ch in prange(n_chunks):
         sc = make_scratch(n_f, k_n)
