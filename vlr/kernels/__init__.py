@@ -19,9 +19,11 @@ running the old contacts from the cache.
 from __future__ import annotations
 
 import hashlib
+import logging
 from pathlib import Path
 
-from numba.core.caching import CacheImpl, _SourceFileBackedLocatorMixin
+import numba
+from numba.core import caching
 
 _FOLDER = Path(__file__).resolve().parent
 
@@ -57,8 +59,20 @@ def _folder_keyed(base: type) -> type:
     return FolderKeyedLocator
 
 
+def _register() -> None:
+    """Put the folder-keyed locators first in numba's list (numba's own names: `CacheImpl`
+    from 0.68, `_CacheImpl` before; the project allows 0.61-0.68)."""
+    impl = getattr(caching, "CacheImpl", None) or getattr(caching, "_CacheImpl", None)
+    mixin = getattr(caching, "_SourceFileBackedLocatorMixin", None)
+    classes = getattr(impl, "_locator_classes", None)
+    if mixin is None or not isinstance(classes, list):
+        logging.getLogger(__name__).warning(
+            "numba %s: its cache locators are not where vlr.kernels expects them; after an "
+            "edit of one kernel file, remove vlr/kernels/__pycache__/*.nb*", numba.__version__)
+        return
+    if not any(c.__name__.startswith("Kernels") for c in classes):
+        classes[:0] = [_folder_keyed(c) for c in classes if issubclass(c, mixin)]
+
+
 # Before the kernel modules import: numba picks a function's locator when it is decorated.
-if not any(c.__name__.startswith("Kernels") for c in CacheImpl._locator_classes):
-    CacheImpl._locator_classes[:0] = [
-        _folder_keyed(c) for c in CacheImpl._locator_classes
-        if issubclass(c, _SourceFileBackedLocatorMixin)]
+_register()
