@@ -12,6 +12,7 @@ import pytest
 from scipy.spatial.transform import Rotation
 
 from vlr.errors import UserError
+from vlr.kernels.likelihood import rotvec_of
 from vlr.observation import (
     ObservationConfig,
     ObservationModel,
@@ -59,12 +60,45 @@ def test_turn_likelihood_is_the_dense_gaussian():
         assert ll[i] == pytest.approx(ref, rel=1e-9)
 
 
+def test_the_kernels_rotation_vector_is_scipys_at_every_angle():
+    # Random rotations, tiny ones and ones a hair from a half turn (Shepperd's branches).
+    rng = np.random.default_rng(3)
+    axes = rng.normal(size=(60, 3))
+    axes /= np.linalg.norm(axes, axis=1, keepdims=True)
+    angles = np.concatenate([rng.uniform(0, np.pi, 30), [0.0, 1e-12, 1e-7, 1e-3],
+                             np.pi - np.array([1e-9, 1e-6, 1e-3]), rng.uniform(3.0, np.pi, 23)])
+    mats = Rotation.from_rotvec(axes * angles[:, None]).as_matrix()
+    got = np.array([rotvec_of(*m.ravel()) for m in mats])
+    ref = Rotation.from_matrix(mats).as_rotvec()
+    # At a half turn the vector and its opposite are the same rotation.
+    flip = np.linalg.norm(got + ref, axis=1) < np.linalg.norm(got - ref, axis=1)
+    got[flip & (angles > 3.0)] *= -1
+    np.testing.assert_allclose(got, ref, atol=1e-7)
+
+
+def test_the_plain_likelihood_is_the_dense_gaussian_far_off_too():
+    st = _particles(8, seed=4)
+    obs = PomObservation(np.array([0.001, -0.002, 0.003]),
+                         Rotation.random(random_state=9).as_matrix())
+    om = _model(2e-4, 0.004)
+    ll = om.log_likelihood(st, obs)
+    e = np.concatenate([st.pos - obs.position, rotation_error(st.rot, obs.rotation[None])], axis=1)
+    ref = -0.5 * ((e[:, :3] / 2e-4) ** 2).sum(1) - 0.5 * ((e[:, 3:] / 0.004) ** 2).sum(1)
+    np.testing.assert_allclose(ll, ref, rtol=1e-9)
+
+
 def test_a_failed_solve_gets_no_weight_not_an_error():
     st = _particles(3)
     st.valid[1:] = False
     st.rot[1] = np.nan
     st.rot[2] = 0.0
     obs = PomObservation(st.pos[0], st.rot[0])
+    ll = _model(sigma_turn=0.01).log_likelihood(st, obs)
+    assert np.isfinite(ll[0]) and np.isneginf(ll[1:]).all()
+    # A row marked valid whose pose is not finite gets no weight either.
+    st.valid[:] = True
+    st.rot[2] = np.eye(3)
+    st.pos[2] = np.nan
     ll = _model(sigma_turn=0.01).log_likelihood(st, obs)
     assert np.isfinite(ll[0]) and np.isneginf(ll[1:]).all()
 

@@ -24,6 +24,7 @@ from typing import Literal
 
 import numpy as np
 
+from vlr.kernels.frames import object_points, palm_points
 from vlr.kinematics import HandModel, angles_from_normals, normals_from_angles
 from vlr.motion import MotionConfig, MotionModel, ObjectParams, ParticleState
 from vlr.observation import ObservationConfig, ObservationModel, PoseObservation
@@ -476,18 +477,26 @@ class GraspFilter:
         if moved is None:
             moved = np.ones(state.n, dtype=bool)
         idx = np.flatnonzero(moved)
-        sub = state.take(idx)
-        status, iters = self.motion.solve(sub, self.command, self._project_cfg)
+        # In place: the rows left alone are held out of the solve as invalid ones are
+        # (status "inactive", no evaluation), then given their validity back.
+        valid = state.valid.copy()
+        state.valid &= moved
+        pos, rot = state.pos[idx], state.rot[idx]
+        status, iters = self.motion.solve(state, self.command, self._project_cfg)
+        state.valid[~moved] = valid[~moved]
+        status, iters = status[idx], iters[idx]
         self.project_status = np.bincount(status, minlength=5)
         self.project_status[0] += state.n - len(idx)
         self.newton_iterations["settle"] = float(np.median(iters)) if len(idx) else 0.0
         self.profile.update(settle_mean=float(iters.mean()) if len(idx) else 0.0,
                             settled_share=len(idx) / state.n)
-        residuals = sub.contact_residuals(self.model)
-        sub.pos[...] = state.pos[idx]
-        sub.rot[...] = state.rot[idx]
-        sub.anchor_to_pose(self.model, residuals)
-        state.put(idx, sub)
+        # The settled particle's contacts, each with its stretch, are where its anchors
+        # are now, p + R a (`ParticleState.contact_residuals`); the anchors follow them to
+        # the pose before the settle (`anchor_to_pose`).
+        held = palm_points(state.anchors[idx], state.pos[idx], state.rot[idx])
+        state.pos[idx] = pos
+        state.rot[idx] = rot
+        state.anchors[idx] = object_points(held, pos, rot)
 
     def summarize(self, values: np.ndarray) -> Summary:
         """Mean, median and 95% interval of a quantity of the current hypotheses, (H, ...)

@@ -42,6 +42,7 @@ import numpy as np
 from vlr.kernels import records as rec
 from vlr.kernels import solve as ksolve
 from vlr.kernels.contacts import STICK_ZONE
+from vlr.kernels.frames import object_points, palm_points
 from vlr.kinematics import HandModel, contact_in_distal, contact_points
 from vlr.spec import ObjectSpec
 from vlr.surface import FLAT_CURVATURE, LocalSurface, contact_radii
@@ -323,14 +324,13 @@ class ParticleState:
         truth then moved by 0.5 degrees when settled again, every iteration."""
         c = self.contacts(model)
         if residuals is not None:
-            c = c + residuals
-        self.anchors = np.ascontiguousarray((c - self.pos[:, None, :]) @ self.rot)
+            c += residuals
+        self.anchors = object_points(c, self.pos, self.rot)
 
     def contact_residuals(self, model: HandModel) -> np.ndarray:
         """(P, N, 3) anchor minus contact point in the palm frame, R a_i + p - p_i [m]: the
         stretch of the contacts (Eq. 8 as a stiff spring), k_c times it the force."""
-        anchors_palm = self.anchors @ np.swapaxes(self.rot, -1, -2) + self.pos[:, None, :]
-        return anchors_palm - self.contacts(model)
+        return palm_points(self.anchors, self.pos, self.rot) - self.contacts(model)
 
 
 def _map(a: np.ndarray | None, f) -> np.ndarray | None:

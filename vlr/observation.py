@@ -47,6 +47,7 @@ from typing import Protocol
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from vlr.kernels.likelihood import pose_terms
 from vlr.kinematics import HandModel, pom_from_contacts
 from vlr.motion import ParticleState
 
@@ -208,28 +209,23 @@ class ObservationModel:
         return np.where(state.valid & np.isfinite(ll), ll, -np.inf)
 
     def _pose_terms(self, state: ParticleState,
-                    obs: PoseObservation) -> tuple[np.ndarray, np.ndarray | float]:
-        """The pose's term of `log_likelihood` (Eq. 5) as its quadratic form and its log
-        normalisation (relative to the base scales): log p = -quad / 2 + log_norm."""
-        if self.sigma_turn > 0:
-            return self._turn_terms(state, obs)
-        e_pos, e_rot = self.errors(state, obs)
-        return (e_pos / self.sigma_pos) ** 2 + (e_rot / self.sigma_rot) ** 2, 0.0
-
-    def _turn_terms(self, state: ParticleState,
                     obs: PoseObservation) -> tuple[np.ndarray, np.ndarray]:
-        """Gaussian with the turn's covariance D + s^2 v v^T (module docstring), normalised
-        against D alone: (quadratic form, log normalisation), (P,) each."""
+        """The pose's term of `log_likelihood` (Eq. 5): with the turn, Gaussian with the
+        turn's covariance D + s^2 v v^T (module docstring), normalised against D alone; as
+        (quadratic form, log normalisation), (P,) each, log p = -quad / 2 + log_norm. One
+        pass over the particles (`vlr.kernels.likelihood`); a failed solve's row or a pose
+        not finite gets quad = inf."""
         pos, rot = self.predict(state)
-        # A failed solve's pose may be NaN or degenerate, which the rotation vector refuses;
-        # its weight is -inf anyway (`log_likelihood`).
-        ok = np.asarray(state.valid) & np.isfinite(rot).all(axis=(1, 2))
-        rot = np.where(ok[:, None, None], rot, np.eye(3))
-        e = np.concatenate([pos - np.asarray(obs.position)[None, :],
-                            rotation_error(rot, np.asarray(obs.rotation)[None, :, :])], axis=-1)
-        d_inv = np.repeat([self.sigma_pos ** -2, self.sigma_rot ** -2], 3)
-        v = grasp_turn(pos, rot, state.anchors, self.opposed)
-        s2 = self.sigma_turn ** 2
-        vde = (v * d_inv * e).sum(axis=-1)
-        g = 1.0 + s2 * (v * d_inv * v).sum(axis=-1)
-        return (e * e * d_inv).sum(axis=-1) - s2 * vde ** 2 / g, -0.5 * np.log(g)
+        n, n_f = len(pos), state.anchors.shape[1]
+        if self.sigma_turn > 0 and not (0 <= self.opposed < n_f and n_f >= 3):
+            raise ValueError(f"the turn term's opposed finger {self.opposed}: needs "
+                             f"0 <= opposed < {n_f} and >= 3 fingers")
+        quad, log_norm = np.empty(n), np.empty(n)
+        pose_terms(np.ascontiguousarray(pos, dtype=float), np.ascontiguousarray(rot, dtype=float),
+                   np.ascontiguousarray(state.anchors, dtype=float),
+                   np.ascontiguousarray(state.valid, dtype=np.bool_),
+                   np.asarray(obs.position, dtype=float).reshape(3),
+                   np.ascontiguousarray(obs.rotation, dtype=float).reshape(3, 3),
+                   np.array([self.sigma_pos ** -2, self.sigma_rot ** -2]),
+                   self.sigma_turn ** 2, self.opposed, quad, log_norm)
+        return quad, log_norm
