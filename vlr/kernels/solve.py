@@ -383,6 +383,11 @@ def newton(x, body, hand, cfg, sc, max_iter, prev):
                     and size ** 3 < 0.1 * prev * prev):
                 return True, evals
             prev = size
+            if cfg.spin > 0.0:
+                # The pads' torsional limit follows the normal force from step to step
+                # (a lagged fixed point), so that the solve ends where the two agree.
+                for i in range(n_f):
+                    sc.ctx[i, CTX_SPIN] = cfg.spin * max(0.0, -sc.lam[i, LAM_N])
             e = evaluate(x, body, hand, cfg, sc)
             evals += 1
             continue
