@@ -9,7 +9,8 @@ u0 -> u1 then:
    friction limit mu lambda_n is held at this predicted normal force;
 2. takes full primal-dual Newton steps (`vlr.kernels.contacts`: the constraints' curvature
    weighted by the multipliers, which each step updates to k_c (C + J d)), each step held
-   to the step limits;
+   to the step limits; the pads' torsional limit mu_t lambda_n follows the normal force
+   from step to step;
 3. stops when a step is under the tolerance (taken), or when the steps converge
    quadratically and the next one would be a tenth of it (|d_k| < |d_k-1| / 10 and
    |d_k|^3 / |d_k-1|^2 < tol / 10, taken): no evaluation only to confirm;
