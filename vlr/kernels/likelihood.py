@@ -6,7 +6,7 @@ v = (a x (p - c_o), a) from its own contacts (`vlr.observation.grasp_turn`), and
 Sherman-Morrison form of e^T (D + s^2 v v^T)^-1 e and of its log normalisation. NumPy and
 scipy's `Rotation` did the same in seven passes over (P, 3, 3) arrays, about a twentieth of a
 filter iteration; `vlr.observation.rotation_error` and `grasp_turn` stay the reference
-(tests/test_observation.py).
+(tests/test_turn.py).
 """
 
 from __future__ import annotations
