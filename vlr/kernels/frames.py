@@ -10,7 +10,7 @@ from numba import njit, prange
 
 
 @njit(parallel=True, cache=True)
-def to_palm(points, pos, rot, out):
+def _to_palm_batch(points, pos, rot, out):
     """out[q, i] = pos[q] + rot[q] points[q, i]: (P, N, 3) object-frame points to the palm."""
     n_p, n_f = points.shape[0], points.shape[1]
     for q in prange(n_p):
@@ -22,7 +22,7 @@ def to_palm(points, pos, rot, out):
 
 
 @njit(parallel=True, cache=True)
-def to_object(points, pos, rot, out):
+def _to_object_batch(points, pos, rot, out):
     """out[q, i] = rot[q]^T (points[q, i] - pos[q]): (P, N, 3) palm-frame points to the
     object frame."""
     n_p, n_f = points.shape[0], points.shape[1]
@@ -38,14 +38,16 @@ def to_object(points, pos, rot, out):
 def palm_points(points: np.ndarray, pos: np.ndarray, rot: np.ndarray) -> np.ndarray:
     """(P, N, 3) object-frame points in the palm frame, p + R a."""
     out = np.empty(np.shape(points))
-    to_palm(np.ascontiguousarray(points, dtype=float), np.ascontiguousarray(pos, dtype=float),
-            np.ascontiguousarray(rot, dtype=float), out)
+    _to_palm_batch(np.ascontiguousarray(points, dtype=float),
+                   np.ascontiguousarray(pos, dtype=float), np.ascontiguousarray(rot, dtype=float),
+                   out)
     return out
 
 
 def object_points(points: np.ndarray, pos: np.ndarray, rot: np.ndarray) -> np.ndarray:
     """(P, N, 3) palm-frame points in the object frame, R^T (x - p)."""
     out = np.empty(np.shape(points))
-    to_object(np.ascontiguousarray(points, dtype=float), np.ascontiguousarray(pos, dtype=float),
-              np.ascontiguousarray(rot, dtype=float), out)
+    _to_object_batch(np.ascontiguousarray(points, dtype=float),
+                     np.ascontiguousarray(pos, dtype=float), np.ascontiguousarray(rot, dtype=float),
+                     out)
     return out
