@@ -1,4 +1,5 @@
-"""Numba kernels of the motion model (Eq. 6-9), internal to `vlr.motion`.
+"""Numba kernels of the motion model (Eq. 6-9), internal to `vlr.motion`, and of the
+particles' other per-iteration passes.
 
 * `records`: the named records every kernel takes (the hand's constants, the particles, the
   solver's settings, the local surface, scratch);
@@ -8,7 +9,9 @@
   pads' Coulomb friction;
 * `arrow`: the Newton system's arrow-structured linear algebra;
 * `solve`: one action per particle by primal-dual Newton from the stored tangent, and the
-  batched entry points.
+  batched entry points;
+* `likelihood`: the pose likelihood's terms (Eq. 5 with the grasp's turn, `vlr.observation`);
+* `frames`: the contacts between the palm and object frames (the anchors, `vlr.motion`).
 
 The kernels' on-disk cache (numba's `cache=True`) is keyed here on the whole folder's
 source: numba keys a function's cache on its own file only, so an edit of `contacts.py`
