@@ -224,8 +224,10 @@ class ObservationModel:
         pose_terms(np.ascontiguousarray(pos, dtype=float), np.ascontiguousarray(rot, dtype=float),
                    np.ascontiguousarray(state.anchors, dtype=float),
                    np.ascontiguousarray(state.valid, dtype=np.bool_),
-                   np.asarray(obs.position, dtype=float).reshape(3),
-                   np.ascontiguousarray(obs.rotation, dtype=float).reshape(3, 3),
+                   # copies: an observation's arrays may be read-only (the camera's), a
+                   # type of its own to the kernel
+                   np.array(obs.position, dtype=float).reshape(3),
+                   np.array(obs.rotation, dtype=float).reshape(3, 3),
                    np.array([self.sigma_pos ** -2, self.sigma_rot ** -2]),
                    self.sigma_turn ** 2, self.opposed, quad, log_norm)
         return quad, log_norm
