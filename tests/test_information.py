@@ -130,11 +130,12 @@ def test_apple_floor_is_above_the_criterion_at_the_likelihoods_scales():
     # commands ramped over 0.1 s): 5.20 and 0.96 degrees, scales 0.31x (5.18 and 0.95 with the
     # stops at 100; 4.64 and 0.95, 0.35x, at 0.35 mm / 0.7 deg without the turn); the model's
     # information, not the particle count, keeps the likelihood's floor above 2 degrees
-    # (docs/RESULTS.md).
+    # (docs/RESULTS.md). The camera's floor is under 2 degrees from action 9 (8 before the
+    # pads' torsional limit followed the normal force within a solve).
     assert 3.5 < at[15]["mean_width_deg"] < 6.0
     assert at[15]["mean_width_deg_camera"] < 1.5
     assert at[15]["mean_width_deg"] < 0.5 * at[1]["mean_width_deg"]
-    assert rep["first_under_target"] is None and rep["first_under_target_camera"] <= 8
+    assert rep["first_under_target"] is None and rep["first_under_target_camera"] <= 10
     assert 0.2 < rep["scale_to_meet_at_budget"] < 0.6
 
 
