@@ -127,11 +127,10 @@ def test_apple_floor_is_above_the_criterion_at_the_likelihoods_scales():
     at = {r["actions"]: r for r in rep["by_action"]}
     assert rep["grasp_lost_at"] is None and len(rep["by_action"]) == 16
     # At the sim's defaults (0.2 mm / 0.4 deg + a 1.0-deg turn, the model's stops at 17 N m/rad,
-    # commands ramped over 0.1 s): 5.20 and 0.96 degrees, scales 0.31x (5.18 and 0.95 with the
-    # stops at 100; 4.64 and 0.95, 0.35x, at 0.35 mm / 0.7 deg without the turn); the model's
-    # information, not the particle count, keeps the likelihood's floor above 2 degrees
-    # (docs/RESULTS.md). The camera's floor is under 2 degrees from action 9 (8 before the
-    # pads' torsional limit followed the normal force within a solve).
+    # commands ramped over 0.1 s): 5.90 and 1.35 degrees after 15 actions, scales 0.26x, the
+    # camera's floor under 2 degrees from action 9 (docs/results/crb-paper-table.json); the
+    # model's information, not the particle count, keeps the likelihood's floor above 2
+    # degrees (docs/RESULTS.md).
     assert 3.5 < at[15]["mean_width_deg"] < 6.0
     assert at[15]["mean_width_deg_camera"] < 1.5
     assert at[15]["mean_width_deg"] < 0.5 * at[1]["mean_width_deg"]

@@ -47,9 +47,8 @@ def test_validation_known_hand(obj, max_proximal_deg):
 def test_validation_nh4_unknown_links():
     # NH4's link after 20 actions is known to about its 12 mm interval's width, so one
     # seed's error is a draw: 2.5-10.1 mm over seeds 0-5 at 3,000 particles (10.1, 2.7,
-    # 4.7, 7.2, 2.5, 2.5; 1.5-6.5 before the pads' torsional limit followed the normal force
-    # within a solve), 0.9-6.0 at 10,000; at 60,000, seeds 0-4, 1.26 mm (docs/RESULTS.md).
-    # The guard is the mean of six seeds: measured 4.94 mm (3.47 before).
+    # 4.7, 7.2, 2.5, 2.5), 0.9-6.0 at 10,000; at 60,000 and 35 actions 1.26 mm
+    # (docs/RESULTS.md). The guard is the mean of six seeds: measured 4.94 mm.
     rows = [_identify("apple", **{"seed": seed, "world.true_hand": "nh4",
                                   "loop.max_iterations": 20,
                                   "filter.unknowns": ["length:right.proximal",
