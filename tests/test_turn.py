@@ -172,3 +172,15 @@ def test_the_turn_term_follows_the_backend():
     assert turn("sim", **{"filter.observation.sigma_turn_deg": 0})[0] == 0.0
     assert turn("synthetic", **{"filter.observation.sigma_turn_deg": 0.8})[0] == pytest.approx(
         np.radians(0.8))
+
+
+def test_the_anchors_frames_are_each_others_inverse_and_numpys():
+    from vlr.kernels.frames import object_points, palm_points
+
+    rng = np.random.default_rng(5)
+    a = rng.normal(size=(7, 3, 3)) * 0.03
+    pos = rng.normal(size=(7, 3)) * 0.01
+    rot = Rotation.random(7, random_state=5).as_matrix()
+    x = palm_points(a, pos, rot)
+    np.testing.assert_allclose(x, a @ np.swapaxes(rot, -1, -2) + pos[:, None, :], atol=1e-15)
+    np.testing.assert_allclose(object_points(x, pos, rot), a, atol=1e-15)

@@ -35,19 +35,17 @@ def _to_object_batch(points, pos, rot, out):
                 out[q, i, a] = rot[q, 0, a] * d0 + rot[q, 1, a] * d1 + rot[q, 2, a] * d2
 
 
+def _batched(kernel, points, pos, rot) -> np.ndarray:
+    out = np.empty(np.shape(points))
+    kernel(*(np.ascontiguousarray(a, dtype=float) for a in (points, pos, rot)), out)
+    return out
+
+
 def palm_points(points: np.ndarray, pos: np.ndarray, rot: np.ndarray) -> np.ndarray:
     """(P, N, 3) object-frame points in the palm frame, p + R a."""
-    out = np.empty(np.shape(points))
-    _to_palm_batch(np.ascontiguousarray(points, dtype=float),
-                   np.ascontiguousarray(pos, dtype=float), np.ascontiguousarray(rot, dtype=float),
-                   out)
-    return out
+    return _batched(_to_palm_batch, points, pos, rot)
 
 
 def object_points(points: np.ndarray, pos: np.ndarray, rot: np.ndarray) -> np.ndarray:
     """(P, N, 3) palm-frame points in the object frame, R^T (x - p)."""
-    out = np.empty(np.shape(points))
-    _to_object_batch(np.ascontiguousarray(points, dtype=float),
-                     np.ascontiguousarray(pos, dtype=float), np.ascontiguousarray(rot, dtype=float),
-                     out)
-    return out
+    return _batched(_to_object_batch, points, pos, rot)
