@@ -26,6 +26,7 @@ import numpy as np
 
 from vlr.kernels.frames import object_points, palm_points
 from vlr.kinematics import HandModel, angles_from_normals, normals_from_angles
+from vlr.model_check import ModelCheckConfig, predictive_surprise
 from vlr.motion import MotionConfig, MotionModel, ObjectParams, ParticleState
 from vlr.observation import ObservationConfig, ObservationModel, PoseObservation
 from vlr.surface import surface_contact_normals
@@ -240,6 +241,8 @@ class FilterConfig:
         object: the object the filter believes (`ObjectBelief`).
         motion: the motion model (`vlr.motion.MotionConfig`).
         observation: the likelihood (`vlr.observation.ObservationConfig`).
+        model_check: whether the model explains the observations
+            (`vlr.model_check.ModelCheckConfig`).
     """
 
     estimator: Literal["pf", "ukf"] = "pf"
@@ -258,6 +261,7 @@ class FilterConfig:
     object: ObjectBelief = field(default_factory=ObjectBelief)
     motion: MotionConfig = field(default_factory=MotionConfig)
     observation: ObservationConfig = field(default_factory=ObservationConfig)
+    model_check: ModelCheckConfig = field(default_factory=ModelCheckConfig)
 
     def __post_init__(self) -> None:
         if self.estimator not in ("pf", "ukf"):
@@ -334,7 +338,8 @@ class IterationRecord:
     prior: summary after the motion step (before weighting); posterior: after resampling,
     before jitter (None for a prediction-only step). ci_deg: the convergence measure. The
     unscented Kalman filter (`vlr.ukf`) gives its Gaussian's summaries, ess NaN, beta 1 and
-    its sigma points that failed to solve as n_invalid.
+    its sigma points that failed to solve as n_invalid. surprise: the observation's
+    standard score under the estimator's predictive (`vlr.model_check`), NaN without one.
     """
 
     iteration: int
@@ -345,6 +350,7 @@ class IterationRecord:
     beta: float
     n_invalid: int
     ci_deg: float
+    surprise: float = float("nan")
 
 
 def _liu_west(x: np.ndarray, a: float, h: float, rng: np.random.Generator) -> np.ndarray:
@@ -387,6 +393,9 @@ class GraspFilter:
         self.unknowns = tuple(parse_unknown(s, model, self.config.priors.get(s), obj)
                               for s in self.config.unknowns)
         self.rng = np.random.default_rng(seed)
+        # The model check's draws: a generator of its own, so that the check never moves
+        # the estimate (`vlr.model_check`).
+        self.check_rng = np.random.default_rng([seed, 0x6D63])
         self.state: ParticleState | None = None
         self.history: list[IterationRecord] = []
         self.iteration = 0
@@ -637,6 +646,9 @@ class ParticleFilter(GraspFilter):
         log_lik = self._log_likelihood(state, observation)
         tm["observation"] = time.perf_counter() - t
         t = time.perf_counter()
+        surprise = self._surprise(state, observation)
+        tm["check"] = time.perf_counter() - t
+        t = time.perf_counter()
         w, beta = temper(log_lik, cfg.ess_fraction)
         tm["weights"] = time.perf_counter() - t
         ess = effective_sample_size(w)
@@ -654,9 +666,23 @@ class ParticleFilter(GraspFilter):
         self._jitter(x, idx)
         tm["jitter"] = time.perf_counter() - t
         rec = IterationRecord(self.iteration, self.command, prior, posterior, ess, beta,
-                              n_invalid, ci)
+                              n_invalid, ci, surprise)
         self.history.append(rec)
         return rec
+
+    def _surprise(self, state: ParticleState, observation: PoseObservation) -> float:
+        """The observation's surprise under the particles' predictive (`vlr.model_check`),
+        over a uniform draw of `model_check.particles` of the valid particles."""
+        cfg = self.config.model_check
+        valid = np.flatnonzero(state.valid)
+        if len(valid) > cfg.particles:
+            valid = np.sort(self.check_rng.choice(valid, size=cfg.particles, replace=False))
+        tensions = None
+        if self.obs_model.sigma_tension > 0 and len(valid):
+            tensions = self.motion.tensions(state.take(valid), self.command)
+        return predictive_surprise(state.pos[valid], state.rot[valid], state.anchors[valid],
+                                   self.obs_model, observation, tensions, self.check_rng,
+                                   cfg.replicates)
 
     def _log_likelihood(self, state: ParticleState, observation: PoseObservation) -> np.ndarray:
         """Eq. 5 per particle; with the tension term, each particle's predicted tendon

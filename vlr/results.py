@@ -8,6 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
+from vlr.model_check import verdict
+
 __all__ = ["summarize", "write_outputs", "COVERAGE_TOLERANCE_DEG"]
 
 # A joint angle counts as covered "within tolerance" when the truth lies at most this far
@@ -41,6 +43,10 @@ def summarize(result, model, settings, wall: float, final_truth=None) -> dict:
                  "unknown_estimates": {name: vars(e) for name, e in result.unknowns.items()},
                  "timing": {"filter_s_per_iteration_median": float(np.median(result.seconds)),
                             "filter_s": float(np.sum(result.seconds)), "wall_s": wall}}
+    # Whether the model explains what the filter saw (`vlr.model_check`): from the
+    # filter's own predictions, never the truth.
+    out["model_check"] = verdict([r.surprise for r in result.history],
+                                 settings.filter.model_check)
     # Per iteration (the grasp's update first): the convergence measure, and against the
     # truth the mean proximal error, so that a table can read either at any iteration.
     out["ci_deg_by_iteration"] = [round(float(r.ci_deg), 4) for r in result.history]

@@ -63,6 +63,7 @@ from vlr.active import noise_covariance
 from vlr.errors import UserError
 from vlr.filter import FilterConfig, GraspFilter, IterationRecord, Summary
 from vlr.kinematics import HandModel
+from vlr.model_check import nis_surprise
 from vlr.motion import STATUS, ObjectParams, ParticleState
 from vlr.observation import PoseObservation, grasp_turn
 from vlr.unknowns import set_unknown
@@ -475,8 +476,11 @@ class UnscentedFilter(GraspFilter):
             kf.x = np.clip(kf.x, self._lo, self._hi)
             kf.P = _psd(kf.P)
             post = self._summary(kf.x, kf.P)
+            # The classical model check: the innovation's NIS against chi2(d)
+            # (`vlr.model_check`).
+            surprise = nis_surprise(float(kf.y @ np.linalg.solve(kf.S, kf.y)), len(kf.y))
             rec = IterationRecord(self.iteration, self.command, prior, post, float("nan"), 1.0,
-                                  moved["failed"], self._ci(kf.P))
+                                  moved["failed"], self._ci(kf.P), surprise)
         self.timings["update"] = time.perf_counter() - t
         self.history.append(rec)
         self._redraw()

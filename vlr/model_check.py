@@ -1,0 +1,159 @@
+"""The model check: whether the filter's model explains what the camera sees, from what the
+filter sees alone (a posterior-predictive check, docs/METHOD.md 9).
+
+Per update, the observation's surprise under the filter's own predictive distribution. For
+the particle filter, the predictive of an observation y is the mixture over the particles
+after the motion step (equally weighted: the filter resamples every update) of Eq. 5's
+likelihood, so its log-density at the observation is
+
+    L_obs = log (1/K) sum_i p(y_obs | x_i),
+
+on K particles drawn from the valid ones. Replicate observations y_m drawn from the same
+predictive (a particle j, then the likelihood's noise about its predicted pose, the turn's
+and the tensions' included) give the same log-density's distribution were the model right,
+and the update's surprise is the observed log-density's standard score against it,
+
+    z = (mean_m L_m - L_obs) / sd_m L_m.
+
+The errors are taken in the pose's tangent space at the observation (e_i = (p_i - p_obs,
+rotvec(R_i R_obs^T))), so a replicate's error against particle i is e_i - e_j - n. For the
+unscented Kalman filter the predictive is its Gaussian (innovation y, covariance S), -2 L =
+NIS + const with NIS ~ chi2(d) under the model, and the same standard score is
+z = (NIS - d) / sqrt(2 d): the classical NIS test.
+
+A trial's statistic is the mean of z over its updates after `burn_in` actions (the grasp's
+wide prior first). A model that explains the observations gives a mean about 0 or below (below
+when the likelihood's scales are wider than the world's noise, as ours are: they also absorb
+the motion model's own error); one that cannot gives a larger mean. The threshold is a
+measured one (`ModelCheckConfig.threshold`, docs/RESULTS.md), not a theoretical quantile,
+because the likelihood's widening makes the statistic's null distribution the filter's
+own. The check reads only the particles' predictions and the observation, and draws from a
+generator of its own: it never changes the estimate.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.special import logsumexp
+
+from vlr.observation import ObservationModel, grasp_turn, rotation_error
+
+__all__ = ["ModelCheckConfig", "predictive_surprise", "nis_surprise", "verdict"]
+
+
+@dataclass(frozen=True)
+class ModelCheckConfig:
+    """The model check's settings (module docstring).
+
+    Attributes:
+        threshold: the trial statistic (mean surprise after the burn-in) above which the
+            model is said not to explain the observations; measured on trials it explains
+            (docs/RESULTS.md).
+        burn_in: the first actions left out of the statistic (the grasp's prior is wider
+            than the likelihood and its first updates surprise any model).
+        min_actions: actions after the burn-in before a verdict is given.
+        particles: K, the particles the predictive is taken over (a uniform draw of the
+            valid ones; all of them when fewer).
+        replicates: M, the replicate observations per update.
+    """
+
+    threshold: float = -1.0
+    burn_in: int = 3
+    min_actions: int = 5
+    particles: int = 2048
+    replicates: int = 64
+
+    def __post_init__(self) -> None:
+        if not math.isfinite(self.threshold):
+            raise ValueError(f"threshold {self.threshold!r} must be finite")
+        if self.burn_in < 0:
+            raise ValueError(f"burn_in {self.burn_in} must be >= 0")
+        if self.min_actions < 1:
+            raise ValueError(f"min_actions {self.min_actions} must be >= 1")
+        if self.particles < 16:
+            raise ValueError(f"particles {self.particles} must be >= 16")
+        if self.replicates < 8:
+            raise ValueError(f"replicates {self.replicates} must be >= 8")
+
+
+def predictive_surprise(pos: np.ndarray, rot: np.ndarray, anchors: np.ndarray,
+                        obs_model: ObservationModel, observation,
+                        tensions: np.ndarray | None, rng: np.random.Generator,
+                        replicates: int) -> float:
+    """The standard score z of the observation's log predictive density (module docstring)
+    over the given particles' predictions: pos (K, 3) [m], rot (K, 3, 3), anchors (K, N, 3);
+    `tensions` (K, N) [N] each particle's predicted tendon tensions, weighed when the
+    likelihood weighs them and the observation has them. NaN with fewer than 2 particles."""
+    k = len(pos)
+    if k < 2:
+        return float("nan")
+    e = np.concatenate([pos - np.asarray(observation.position, dtype=float)[None],
+                        rotation_error(rot, np.asarray(observation.rotation, dtype=float)[None])],
+                       axis=-1)
+    d_inv = np.repeat([obs_model.sigma_pos ** -2, obs_model.sigma_rot ** -2], 3)
+    s2 = obs_model.sigma_turn ** 2
+    v = (grasp_turn(pos, rot, anchors, obs_model.opposed) if s2 > 0 else np.zeros_like(e))
+    observed_t = getattr(observation, "tensions", None)
+    weigh_t = obs_model.sigma_tension > 0 and tensions is not None and observed_t is not None
+    t_err = (np.asarray(tensions, dtype=float) - np.asarray(observed_t, dtype=float)[None]
+             if weigh_t else np.zeros((k, 0)))
+    # Replicates: particle j's predicted error plus the likelihood's noise (Eq. 5: D, the
+    # turn's s^2 v v^T, the tensions' s_T^2 I); row 0 is the observation itself.
+    j = rng.integers(0, k, size=replicates)
+    noise = rng.standard_normal((replicates, 6)) / np.sqrt(d_inv)
+    noise += math.sqrt(s2) * rng.standard_normal(replicates)[:, None] * v[j]
+    w = np.vstack([np.zeros(6), e[j] + noise])
+    wt = np.vstack([np.zeros(t_err.shape[1]), t_err[j] + obs_model.sigma_tension
+                    * rng.standard_normal((replicates, t_err.shape[1]))])
+    # -2 log p(w | x_i) up to a constant: (e_i - w)^T Sigma_i^-1 (e_i - w) + log g_i, by
+    # Sherman-Morrison as `vlr.observation` does, for all (replicate, particle) pairs.
+    ed, wd, vd = e * d_inv, w * d_inv, v * d_inv
+    quad = (ed * e).sum(1)[None] - 2.0 * wd @ e.T + (wd * w).sum(1)[:, None]
+    g = 1.0 + s2 * (vd * v).sum(1)
+    vde = (vd * e).sum(1)[None] - w @ vd.T
+    quad -= s2 * vde * vde / g[None]
+    if t_err.shape[1]:
+        ti = obs_model.sigma_tension ** -2
+        quad += ti * ((t_err * t_err).sum(1)[None] - 2.0 * wt @ t_err.T
+                      + (wt * wt).sum(1)[:, None])
+    log_p = logsumexp(-0.5 * quad - 0.5 * np.log(g)[None], axis=1)
+    rep = log_p[1:]
+    sd = rep.std()
+    return float((rep.mean() - log_p[0]) / sd) if sd > 0 else float("nan")
+
+
+def nis_surprise(nis: float, dim: int) -> float:
+    """The Gaussian predictive's standard score (module docstring): (NIS - d) / sqrt(2 d)."""
+    return float((nis - dim) / math.sqrt(2.0 * dim))
+
+
+def verdict(surprise: list[float], config: ModelCheckConfig) -> dict:
+    """The trial's model check from its per-update surprises (the grasp's update first):
+    the statistic (mean surprise after the burn-in), the threshold, the verdict
+    ("consistent", "inconsistent", or "undecided" with fewer than `min_actions` actions
+    after the burn-in) and the first action from which the running statistic stays above
+    the threshold to the end (None when consistent)."""
+    z = np.asarray(surprise, dtype=float)
+    first = 1 + config.burn_in  # update i follows action i (update 0 is the grasp's)
+    tail = z[first:]
+    idx = np.flatnonzero(np.isfinite(tail))
+    out = {"statistic": None, "threshold": config.threshold, "verdict": "undecided",
+           "first_action_flagged": None, "actions": int(len(idx)), "burn_in": config.burn_in,
+           "surprise_by_iteration": [None if not math.isfinite(x) else round(float(x), 3)
+                                     for x in z]}
+    if len(idx) < config.min_actions:
+        return out
+    running = np.cumsum(tail[idx]) / np.arange(1, len(idx) + 1)
+    stat = float(running[-1])
+    out["statistic"] = round(stat, 4)
+    if stat <= config.threshold:
+        out["verdict"] = "consistent"
+        return out
+    out["verdict"] = "inconsistent"
+    below = np.flatnonzero(running[config.min_actions - 1:] <= config.threshold)
+    start = (below[-1] + 1 if len(below) else 0) + config.min_actions - 1
+    out["first_action_flagged"] = int(first + idx[start])
+    return out
