@@ -106,6 +106,10 @@ def format_demo(ident, wall: float) -> str:
                   f"distal {err['distal_deg_mean']:.2f} deg (medians), contact point "
                   f"{contact:.2f} mm;",
                   f"{summary['coverage']:.0%} of the true joints inside their 95% intervals"]
+    if summary.get("model_check"):
+        from vlr.commands.identify import format_model_check
+
+        lines += [format_model_check(summary["model_check"])]
     return "\n".join(lines)
 
 

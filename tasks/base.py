@@ -175,6 +175,8 @@ class HandTaskEnv(gym.Env):
         self.hand = None
         self.pf = None
         self.identification = None
+        # Whether the model explained what the identification saw (`vlr.model_check`).
+        self.model_check: dict | None = None
         self.moves: list[Move] = []
         self.observation = None      # the latest camera pose (vlr.perception.Observation)
         self.center: np.ndarray | None = None
@@ -300,7 +302,7 @@ class HandTaskEnv(gym.Env):
         self.filter_lost = self.grasp_lost = False
         self.grasp_message = ""
         self.identified += 1
-        self.pf = self.identification = None
+        self.pf = self.identification = self.model_check = None
         if not self.identify:
             self._grasp_only(settings.loop.first_observation_frames)
             self._go_to_centre()
@@ -320,6 +322,7 @@ class HandTaskEnv(gym.Env):
                                      observe_through=lambda w: observer,
                                      watch=lambda pf, rec: box.update(pf=pf))
             self.identification = run.result
+            self.model_check = run.summary.get("model_check")
         except FloatingPointError:
             # Every particle's solve failed (too few particles, or a prior that misses the
             # grasp): the episode goes on with the VLR lost, `filter_lost` says so. Before

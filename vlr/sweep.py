@@ -367,6 +367,9 @@ COLUMNS: list[tuple[str, tuple[str, ...]]] = [
     ("s_per_iteration", ("result", "timing", "filter_s_per_iteration_median")),
     ("s_per_trial", ("result", "timing", "filter_s")),
     ("grasp_lost_at", ("result", "grasp_lost_at")),
+    ("model_check", ("result", "model_check", "verdict")),
+    ("model_check_statistic", ("result", "model_check", "statistic")),
+    ("model_check_from", ("result", "model_check", "first_action_flagged")),
 ]
 
 
@@ -523,6 +526,7 @@ SUMMARY_COLUMNS = [("proximal [deg]", "proximal_deg", 2),
                    ("95% interval at 15 [deg]", "ci_deg_at_15", 2),
                    ("contact [mm]", "contact_mm", 2), ("iterations", "iterations", 1),
                    ("coverage", "coverage", 2), ("coverage (0.1 deg)", "coverage_tolerant", 2),
+                   ("model check statistic", "model_check_statistic", 2),
                    ("s/iteration", "s_per_iteration", 2),
                    ("filter s/trial", "s_per_trial", 1),
                    ("proximal link error [mm]", "proximal_link_mm", 2),
@@ -574,6 +578,11 @@ def summarize_rows(rows: list[dict[str, Any]],
         s["trials"] = f"{len(ok)}/{len(rs)}"
         s["converged"] = f"{sum(bool(r.get('converged')) for r in ok)}/{len(ok)}"
         s["grasps lost"] = f"{sum(r.get('grasp_lost_at') is not None for r in ok)}/{len(ok)}"
+        # `vlr.model_check`: the trials whose model did not explain what the filter saw.
+        checked = [r for r in ok if r.get("model_check") in ("consistent", "inconsistent")]
+        s["model check flagged"] = (
+            f"{sum(r['model_check'] == 'inconsistent' for r in checked)}/{len(checked)}"
+            if checked else "-")
         for title, col, digits in SUMMARY_COLUMNS:
             s[title] = _fmt([r.get(col) for r in ok], digits)
         extra = sorted({k for r in ok for k in r if k.startswith(

@@ -196,6 +196,19 @@ def run(args: argparse.Namespace) -> int:
     return 0
 
 
+def format_model_check(check: dict) -> str:
+    """The model check's one line (`vlr.model_check`)."""
+    if check["verdict"] == "undecided":
+        return (f"model check: undecided ({check['actions']} actions after the first "
+                f"{check['burn_in']}, too few)")
+    figure = (f"surprise {check['statistic']:.2f} over {check['actions']} actions, "
+              f"threshold {check['threshold']:.2f}")
+    if check["verdict"] == "consistent":
+        return f"model check: the model explains the observations ({figure})"
+    return (f"model check: the model does NOT explain the observations from action "
+            f"{check['first_action_flagged']} on ({figure}): the intervals may miss the truth")
+
+
 def format_table(result, summary: dict, model) -> str:
     from vlr.results import unknown_units
 
@@ -228,6 +241,8 @@ def format_table(result, summary: dict, model) -> str:
                                      ": the guess (filter.guess_theta_deg) or its spread "
                                      "(filter.theta_spread_deg) missed the grasp, and the "
                                      "answer leans on it"))
+    if summary.get("model_check"):
+        lines.append(format_model_check(summary["model_check"]))
     lines.append(f"filter: {summary['timing']['filter_s_per_iteration_median']:.3f} s per "
                  "iteration (median)")
     if summary.get("estimator") == "ukf":

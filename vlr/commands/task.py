@@ -430,7 +430,8 @@ def run_seed(job: SeedRun) -> dict:
                   **({"controller": dataclasses.asdict(policy.config)}
                      if job.policy is None else {}),
                   **task.metrics(),
-                  "identification": _identification(task.identification),
+                  "identification": _identification(task.identification,
+                                                    task.model_check),
                   "steps": steps,
                   "timing": {"identify_s": t_identified - t0,
                              "wall_s": time.perf_counter() - t0}}
@@ -485,10 +486,13 @@ def _run_seeds(runs: list[SeedRun], out: Path, workers: int) -> int:
     return 1 if failed else 0
 
 
-def _identification(result) -> dict:
+def _identification(result, check: dict | None) -> dict:
     if result is None:
         return {"failed": True}
-    return {"iterations": int(result.iterations), "converged": bool(result.converged)}
+    out = {"iterations": int(result.iterations), "converged": bool(result.converged)}
+    if check is not None:
+        out["model_check"] = {k: v for k, v in check.items() if k != "surprise_by_iteration"}
+    return out
 
 
 def summary_line(result: dict) -> str:
