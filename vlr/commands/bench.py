@@ -4,7 +4,8 @@ against a yardstick measured in the same run.
 The filter is built from the settings tree as `vlr identify` builds it on the sim
 (`vlr.settings`: rolling contacts, the turn term, the stops at 17 N m/rad), and the world is
 the synthetic one holding the apple, so that the iterations are a real run's. Each phase is
-timed apart: motion (the Eq. 9 solve of the action), observation (Eq. 5), weights (tempering),
+timed apart: motion (the Eq. 9 solve of the action), observation (Eq. 5), check (the model
+check's predictive, `vlr.model_check`), weights (tempering),
 resampling, jitter (the Liu-West draw and the settle of the jittered particles); "total" is
 their sum, "summary" (quantiles for the history) is reported apart. The yardstick is one
 batched `np.linalg.solve` of P 12x12 systems, the linear algebra of one Newton step for every
@@ -23,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-PHASES = ("motion", "observation", "weights", "resampling", "jitter")
+PHASES = ("motion", "observation", "check", "weights", "resampling", "jitter")
 CONTACTS = ("rolling", "pinned")
 
 
