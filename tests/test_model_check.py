@@ -153,3 +153,13 @@ def test_an_undeclared_finger_is_flagged():
         check = _synthetic_check(seed, 3000, **{"world.true_hand": "nh1"})
         assert check["verdict"] == "inconsistent", (seed, check["statistic"])
         assert check["first_action_flagged"] == 8
+
+
+def test_the_cli_line():
+    from vlr.commands.identify import format_model_check
+
+    cfg = ModelCheckConfig(threshold=-1.0, burn_in=2, min_actions=3)
+    assert "explains" in format_model_check(verdict([0.0] * 3 + [-1.5] * 5, cfg))
+    line = format_model_check(verdict([0.0] * 3 + [1.0] * 5, cfg))
+    assert "does NOT explain" in line and "from action 5 on" in line
+    assert "undecided" in format_model_check(verdict([0.0] * 4, cfg))

@@ -333,6 +333,24 @@ def test_the_summary_counts_lost_grasps():
     assert summarize_rows(rows)[0]["grasps lost"] == "1/3"
 
 
+def test_the_tables_carry_the_model_check():
+    """Each trial's verdict, statistic and first action flagged; the summary the share
+    flagged of the trials given a verdict, and the statistic's mean."""
+    from vlr.sweep import _row, summarize_rows
+
+    checks = [("consistent", -1.5, None), ("inconsistent", -0.5, 8), ("undecided", None, None)]
+    recs = [{"case": "c", "status": "ok", "settings": {"seed": s},
+             "result": {"model_check": {"verdict": v, "statistic": st,
+                                        "first_action_flagged": first}}}
+            for s, (v, st, first) in enumerate(checks)]
+    rows = [_row(r) for r in recs]
+    assert [r["model_check"] for r in rows] == ["consistent", "inconsistent", "undecided"]
+    assert rows[1]["model_check_from"] == 8
+    summary = summarize_rows(rows)[0]
+    assert summary["model check flagged"] == "1/2"
+    assert summary["model check statistic"] == "-1.00 ± 0.71"
+
+
 def test_every_documented_sweep_file_still_expands(monkeypatch):
     """docs/RESULTS.md quotes `vlr sweep docs/sweeps/X.yaml` for its tables: each file must
     still name valid settings, objects, hands and unknowns; a '# Run: vlr ...' line, where a
