@@ -643,10 +643,14 @@ class ParticleFilter(GraspFilter):
             return rec
         # Eq. 5 likelihood, tempered (docs/METHOD.md 8.2).
         t = time.perf_counter()
-        log_lik = self._log_likelihood(state, observation)
+        # Each particle's predicted tendon tensions, when the likelihood weighs them: the
+        # likelihood's and the model check's.
+        tensions = (self.motion.tensions(state, self.command)
+                    if self.obs_model.sigma_tension > 0 else None)
+        log_lik = self.obs_model.log_likelihood(state, observation, tensions)
         tm["observation"] = time.perf_counter() - t
         t = time.perf_counter()
-        surprise = self._surprise(state, observation)
+        surprise = self._surprise(state, observation, tensions)
         tm["check"] = time.perf_counter() - t
         t = time.perf_counter()
         w, beta = temper(log_lik, cfg.ess_fraction)
@@ -670,26 +674,19 @@ class ParticleFilter(GraspFilter):
         self.history.append(rec)
         return rec
 
-    def _surprise(self, state: ParticleState, observation: PoseObservation) -> float:
+    def _surprise(self, state: ParticleState, observation: PoseObservation,
+                  tensions: np.ndarray | None) -> float:
         """The observation's surprise under the particles' predictive (`vlr.model_check`),
-        over a uniform draw of `model_check.particles` of the valid particles."""
+        over a uniform draw of `model_check.particles` of the valid particles; `tensions`
+        (P, N) their predicted tendon tensions, or None."""
         cfg = self.config.model_check
         valid = np.flatnonzero(state.valid)
         if len(valid) > cfg.particles:
             valid = np.sort(self.check_rng.choice(valid, size=cfg.particles, replace=False))
-        tensions = None
-        if self.obs_model.sigma_tension > 0 and len(valid):
-            tensions = self.motion.tensions(state.take(valid), self.command)
         return predictive_surprise(state.pos[valid], state.rot[valid], state.anchors[valid],
-                                   self.obs_model, observation, tensions, self.check_rng,
-                                   cfg.replicates)
-
-    def _log_likelihood(self, state: ParticleState, observation: PoseObservation) -> np.ndarray:
-        """Eq. 5 per particle; with the tension term, each particle's predicted tendon
-        tensions at the current command are weighed too."""
-        tensions = (self.motion.tensions(state, self.command)
-                    if self.obs_model.sigma_tension > 0 else None)
-        return self.obs_model.log_likelihood(state, observation, tensions)
+                                   self.obs_model, observation,
+                                   None if tensions is None else tensions[valid],
+                                   self.check_rng, cfg.replicates)
 
     def _kernel(self, x: np.ndarray,
                 parents: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray | None]:

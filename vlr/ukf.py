@@ -478,7 +478,7 @@ class UnscentedFilter(GraspFilter):
             post = self._summary(kf.x, kf.P)
             # The classical model check: the innovation's NIS against chi2(d)
             # (`vlr.model_check`).
-            surprise = nis_surprise(float(kf.y @ np.linalg.solve(kf.S, kf.y)), len(kf.y))
+            surprise = nis_surprise(float(kf.y @ kf.SI @ kf.y), len(kf.y))
             rec = IterationRecord(self.iteration, self.command, prior, post, float("nan"), 1.0,
                                   moved["failed"], self._ci(kf.P), surprise)
         self.timings["update"] = time.perf_counter() - t
