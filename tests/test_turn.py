@@ -68,11 +68,16 @@ def test_the_kernels_rotation_vector_is_scipys_at_every_angle():
     angles = np.concatenate([rng.uniform(0, np.pi, 30), [0.0, 1e-12, 1e-7, 1e-3],
                              np.pi - np.array([1e-9, 1e-6, 1e-3]), rng.uniform(3.0, np.pi, 23)])
     mats = Rotation.from_rotvec(axes * angles[:, None]).as_matrix()
-    got = np.array([rotvec_of(*m.ravel()) for m in mats])
+    got = np.array([rotvec_of(m, np.eye(3)) for m in mats])
     ref = Rotation.from_matrix(mats).as_rotvec()
     # At a half turn the vector and its opposite are the same rotation.
     flip = np.linalg.norm(got + ref, axis=1) < np.linalg.norm(got - ref, axis=1)
     got[flip & (angles > 3.0)] *= -1
+    np.testing.assert_allclose(got, ref, atol=1e-7)
+    # Of a product R S^T, as the likelihood reads a pose error.
+    others = Rotation.random(len(mats), random_state=4).as_matrix()
+    got = np.array([rotvec_of(m, s) for m, s in zip(mats, others, strict=True)])
+    ref = Rotation.from_matrix(mats @ others.transpose(0, 2, 1)).as_rotvec()
     np.testing.assert_allclose(got, ref, atol=1e-7)
 
 

@@ -47,7 +47,7 @@ from typing import Protocol
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from vlr.kernels.likelihood import pose_terms
+from vlr.kernels.likelihood import Observed, Scales, Terms, pose_terms
 from vlr.kinematics import HandModel, pom_from_contacts
 from vlr.motion import ParticleState
 
@@ -226,8 +226,9 @@ class ObservationModel:
                    np.ascontiguousarray(state.valid, dtype=np.bool_),
                    # copies: an observation's arrays may be read-only (the camera's), a
                    # type of its own to the kernel
-                   np.array(obs.position, dtype=float).reshape(3),
-                   np.array(obs.rotation, dtype=float).reshape(3, 3),
-                   np.array([self.sigma_pos ** -2, self.sigma_rot ** -2]),
-                   self.sigma_turn ** 2, self.opposed, quad, log_norm)
+                   Observed(np.array(obs.position, dtype=float).reshape(3),
+                            np.array(obs.rotation, dtype=float).reshape(3, 3)),
+                   Scales(np.array([self.sigma_pos ** -2, self.sigma_rot ** -2]),
+                          float(self.sigma_turn ** 2), int(self.opposed)),
+                   Terms(quad, log_norm))
         return quad, log_norm

@@ -12,15 +12,37 @@ filter iteration; `vlr.observation.rotation_error` and `grasp_turn` stay the ref
 from __future__ import annotations
 
 import math
+from collections import namedtuple
 
 from numba import njit, prange
 
+# The observation (`vlr.observation.PoseObservation`): its position p (3,) and rotation r
+# (3, 3), in the palm frame.
+Observed = namedtuple("Observed", "p r")
+
+# The likelihood's scales: d_inv (2,) the base scales' inverse variances (position's,
+# rotation's), s2 the turn's variance [rad^2] (0: no turn term), opposed the finger at the
+# turn axis's start.
+Scales = namedtuple("Scales", "d_inv s2 opposed")
+
+# Per particle, what `pose_terms` writes: quad (P,) and log_norm (P,).
+Terms = namedtuple("Terms", "quad log_norm")
+
 
 @njit(cache=True, inline="always", _nrt=False)
-def rotvec_of(r00, r01, r02, r10, r11, r12, r20, r21, r22):
-    """The rotation vector [rad] of a rotation matrix, through its unit quaternion
-    (Shepperd's choice of the largest of w, x, y, z: accurate at every angle up to pi),
-    the quaternion's sign taken with w >= 0, as scipy's `as_rotvec`."""
+def _dot(R, S, a, b):
+    """(R S^T)[a, b]."""
+    return R[a, 0] * S[b, 0] + R[a, 1] * S[b, 1] + R[a, 2] * S[b, 2]
+
+
+@njit(cache=True, inline="always", _nrt=False)
+def rotvec_of(R, S):
+    """The rotation vector [rad] of R S^T (two rotation matrices), through its unit
+    quaternion (Shepperd's choice of the largest of w, x, y, z: accurate at every angle up
+    to pi), the quaternion's sign taken with w >= 0, as scipy's `as_rotvec`."""
+    r00, r01, r02 = _dot(R, S, 0, 0), _dot(R, S, 0, 1), _dot(R, S, 0, 2)
+    r10, r11, r12 = _dot(R, S, 1, 0), _dot(R, S, 1, 1), _dot(R, S, 1, 2)
+    r20, r21, r22 = _dot(R, S, 2, 0), _dot(R, S, 2, 1), _dot(R, S, 2, 2)
     tr = r00 + r11 + r22
     if tr >= r00 and tr >= r11 and tr >= r22:
         w = 0.5 * math.sqrt(max(1.0 + tr, 0.0))
@@ -46,22 +68,20 @@ def rotvec_of(r00, r01, r02, r10, r11, r12, r20, r21, r22):
     return k * x, k * y, k * z
 
 
-@njit(cache=True, inline="always", _nrt=False)
-def _dot(R, S, a, b):
-    """(R S^T)[a, b]."""
-    return R[a, 0] * S[b, 0] + R[a, 1] * S[b, 1] + R[a, 2] * S[b, 2]
-
-
 @njit(parallel=True, cache=True)
-def pose_terms(pos, rot, anchors, valid, p_obs, r_obs, d_inv, s2, opposed, quad, log_norm):
-    """Into quad (P,) and log_norm (P,): e^T D^-1 e - s^2 (v^T D^-1 e)^2 / g and -log(g) / 2,
-    g = 1 + s^2 v^T D^-1 v (`vlr.observation` module docstring); s2 = 0: no turn term
-    (g = 1). Invalid rows (a failed solve's, or a pose not finite) get quad = inf.
+def pose_terms(pos, rot, anchors, valid, obs, scales, out):
+    """Into out (`Terms`): e^T D^-1 e - s^2 (v^T D^-1 e)^2 / g and -log(g) / 2, g = 1 +
+    s^2 v^T D^-1 v (`vlr.observation` module docstring); s2 = 0: no turn term (g = 1).
+    Invalid rows (a failed solve's, or a pose not finite) get quad = inf.
 
-    pos (P, 3), rot (P, 3, 3), anchors (P, N, 3) [object frame]; p_obs (3,), r_obs (3, 3);
-    valid (P,) bool; d_inv (2,) the base scales' inverse variances (position's, rotation's);
-    opposed: the finger at the turn axis's start."""
+    pos (P, 3), rot (P, 3, 3), anchors (P, N, 3) [object frame], valid (P,) bool; obs
+    (`Observed`) and scales (`Scales`)."""
     n_p, n_f = anchors.shape[0], anchors.shape[1]
+    # Names of their own: a write into a record's array in a prange body is lost (numba
+    # 0.68, `vlr.kernels.solve.solve_batch`).
+    quad, log_norm = out.quad, out.log_norm
+    p_obs, r_obs = obs.p, obs.r
+    d_inv, s2, opposed = scales.d_inv, scales.s2, scales.opposed
     for q in prange(n_p):
         R = rot[q]
         ok = valid[q]
@@ -74,9 +94,7 @@ def pose_terms(pos, rot, anchors, valid, p_obs, r_obs, d_inv, s2, opposed, quad,
             log_norm[q] = 0.0
             continue
         e0, e1, e2 = pos[q, 0] - p_obs[0], pos[q, 1] - p_obs[1], pos[q, 2] - p_obs[2]
-        e3, e4, e5 = rotvec_of(_dot(R, r_obs, 0, 0), _dot(R, r_obs, 0, 1), _dot(R, r_obs, 0, 2),
-                               _dot(R, r_obs, 1, 0), _dot(R, r_obs, 1, 1), _dot(R, r_obs, 1, 2),
-                               _dot(R, r_obs, 2, 0), _dot(R, r_obs, 2, 1), _dot(R, r_obs, 2, 2))
+        e3, e4, e5 = rotvec_of(R, r_obs)
         quad_q = ((e0 * e0 + e1 * e1 + e2 * e2) * d_inv[0]
                   + (e3 * e3 + e4 * e4 + e5 * e5) * d_inv[1])
         if s2 == 0.0:
