@@ -37,9 +37,9 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.special import logsumexp
 
-from vlr.observation import ObservationModel, grasp_turn, rotation_error
+from vlr.kernels.likelihood import Observed, mixture_log_density, pose_errors
+from vlr.observation import ObservationModel
 
 __all__ = ["ModelCheckConfig", "predictive_surprise", "nis_surprise", "verdict"]
 
@@ -94,12 +94,14 @@ def predictive_surprise(pos: np.ndarray, rot: np.ndarray, anchors: np.ndarray,
     k = len(pos)
     if k < 2:
         return float("nan")
-    e = np.concatenate([pos - np.asarray(observation.position, dtype=float)[None],
-                        rotation_error(rot, np.asarray(observation.rotation, dtype=float)[None])],
-                       axis=-1)
-    d_inv = np.repeat([obs_model.sigma_pos ** -2, obs_model.sigma_rot ** -2], 3)
     s2 = obs_model.sigma_turn ** 2
-    v = (grasp_turn(pos, rot, anchors, obs_model.opposed) if s2 > 0 else np.zeros_like(e))
+    e, v = np.empty((k, 6)), np.empty((k, 6))
+    pose_errors(np.ascontiguousarray(pos, dtype=float), np.ascontiguousarray(rot, dtype=float),
+                np.ascontiguousarray(anchors, dtype=float),
+                Observed(np.array(observation.position, dtype=float).reshape(3),
+                         np.array(observation.rotation, dtype=float).reshape(3, 3)),
+                int(obs_model.opposed) if s2 > 0 else -1, e, v)
+    d_inv = np.repeat([obs_model.sigma_pos ** -2, obs_model.sigma_rot ** -2], 3)
     observed_t = getattr(observation, "tensions", None)
     weigh_t = obs_model.sigma_tension > 0 and tensions is not None and observed_t is not None
     t_err = (np.asarray(tensions, dtype=float) - np.asarray(observed_t, dtype=float)[None]
@@ -112,18 +114,14 @@ def predictive_surprise(pos: np.ndarray, rot: np.ndarray, anchors: np.ndarray,
     w = np.vstack([np.zeros(6), e[j] + noise])
     wt = np.vstack([np.zeros(t_err.shape[1]), t_err[j] + obs_model.sigma_tension
                     * rng.standard_normal((replicates, t_err.shape[1]))])
-    # -2 log p(w | x_i) up to a constant: (e_i - w)^T Sigma_i^-1 (e_i - w) + log g_i, by
-    # Sherman-Morrison as `vlr.observation` does, for all (replicate, particle) pairs.
-    ed, wd, vd = e * d_inv, w * d_inv, v * d_inv
-    quad = (ed * e).sum(1)[None] - 2.0 * wd @ e.T + (wd * w).sum(1)[:, None]
-    g = 1.0 + s2 * (vd * v).sum(1)
-    vde = (vd * e).sum(1)[None] - w @ vd.T
-    quad -= s2 * vde * vde / g[None]
-    if t_err.shape[1]:
-        ti = obs_model.sigma_tension ** -2
-        quad += ti * ((t_err * t_err).sum(1)[None] - 2.0 * wt @ t_err.T
-                      + (wt * wt).sum(1)[:, None])
-    log_p = logsumexp(-0.5 * quad - 0.5 * np.log(g)[None], axis=1)
+    # The tensions are further dimensions of the same Gaussian, off the turn's direction.
+    n_t = t_err.shape[1]
+    log_p = np.empty(replicates + 1)
+    mixture_log_density(np.hstack([e, t_err]), np.hstack([v, np.zeros((k, n_t))]),
+                        np.hstack([w, wt]),
+                        np.concatenate([d_inv, np.full(n_t, obs_model.sigma_tension ** -2.0)
+                                        if n_t else d_inv]),
+                        float(s2), log_p)
     rep = log_p[1:]
     sd = rep.std()
     return float((rep.mean() - log_p[0]) / sd) if sd > 0 else float("nan")
