@@ -470,3 +470,22 @@ def test_a_plane_bent_to_a_curvature_rolls_as_that_sphere(modelo):
     assert np.all(plane.solve(bent, u, u_from=u0)[0] == 0)
     for name in ("theta", "pos", "anchors", "normals"):
         np.testing.assert_allclose(getattr(bent, name), getattr(st, name), atol=1e-12)
+
+
+def test_resampling_in_place_is_taking_the_same_particles(modelo):
+    """`ParticleState.resample` (in place, `vlr.kernels.resample`) gives what `take` does, for
+    sorted indexes of every pattern: runs, skips, the first and the last repeated."""
+    _, st, _ = grasp(modelo, 7)
+    rng = np.random.default_rng(0)
+    st.theta += rng.normal(0, 0.01, st.theta.shape)
+    st.valid[3] = False
+    st.tangent = rng.normal(size=(7, 4, 3))
+    for idx in (np.array([0, 0, 2, 2, 2, 5, 6]), np.array([6] * 7), np.array([0] * 7),
+                np.arange(7), np.sort(rng.integers(0, 7, 7))):
+        want = st.take(idx)
+        got = st.copy()
+        got.resample(idx)
+        for name in ("theta", "pos", "rot", "anchors", "valid", "tangent"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
+    with pytest.raises(ValueError, match="sorted"):
+        st.copy().resample(np.array([1, 0, 2, 3, 4, 5, 6]))

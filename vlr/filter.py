@@ -659,7 +659,7 @@ class ParticleFilter(GraspFilter):
         # Resample (systematic), then jitter.
         t = time.perf_counter()
         idx = systematic_resample(w, self.rng)
-        self.state = state = state.take(idx)
+        state.resample(idx)
         x = x[idx]
         tm["resampling"] = time.perf_counter() - t
         t = time.perf_counter()

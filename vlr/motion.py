@@ -43,6 +43,7 @@ from vlr.kernels import records as rec
 from vlr.kernels import solve as ksolve
 from vlr.kernels.contacts import STICK_ZONE
 from vlr.kernels.frames import object_points, palm_points
+from vlr.kernels.resample import gather_sorted
 from vlr.kinematics import HandModel, contact_in_distal, contact_points
 from vlr.spec import ObjectSpec
 from vlr.surface import FLAT_CURVATURE, LocalSurface, contact_radii
@@ -238,6 +239,23 @@ class ParticleState:
         return ParticleState(**{f.name: _map(getattr(self, f.name),
                                              lambda a: np.ascontiguousarray(a[idx]))
                                 for f in fields(self)})
+
+    def resample(self, idx: np.ndarray) -> None:
+        """Replace each particle by the particle `idx` names, in place; idx (P,) sorted, as
+        systematic resampling gives it (`vlr.kernels.resample`: no allocation). An array
+        that is not this state's own (a view) is copied as `take` does."""
+        idx = np.asarray(idx, dtype=np.int64)
+        if len(idx) != self.n or (len(idx) > 1 and np.any(idx[1:] < idx[:-1])):
+            raise ValueError(f"resample: needs {self.n} sorted indexes, got {len(idx)}"
+                             f"{'' if len(idx) != self.n else ' unsorted'}")
+        for f in fields(self):
+            a = getattr(self, f.name)
+            if a is None:
+                continue
+            if a.flags.owndata and a.flags.c_contiguous and a.flags.writeable:
+                gather_sorted(a.reshape(self.n, -1), idx)
+            else:
+                setattr(self, f.name, np.ascontiguousarray(a[idx]))
 
     def put(self, idx: np.ndarray, other: ParticleState) -> None:
         """Write the particles of `other` into the places `idx` of this state (in place)."""

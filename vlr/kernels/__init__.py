@@ -11,7 +11,8 @@ particles' other per-iteration passes.
 * `solve`: one action per particle by primal-dual Newton from the stored tangent, and the
   batched entry points;
 * `likelihood`: the pose likelihood's terms (Eq. 5 with the grasp's turn, `vlr.observation`);
-* `frames`: the contacts between the palm and object frames (the anchors, `vlr.motion`).
+* `frames`: the contacts between the palm and object frames (the anchors, `vlr.motion`);
+* `resample`: resampling the particles' arrays in place.
 
 The kernels' on-disk cache (numba's `cache=True`) is keyed here on the whole folder's
 source: numba keys a function's cache on its own file only, so an edit of `contacts.py`
