@@ -52,11 +52,13 @@ def _unavailable(exc: Exception) -> int:
 def main(argv: list[str] | None = None) -> int:
     from vlr.hand import CommandError, GraspError
     from vlr.logs import configure, level_for
+    from vlr.memory import keep_freed_memory
     from vlr.spec import SpecError
 
     parser = build_parser()
     args = parser.parse_args(argv)
     configure(level_for(args.log_verbose, args.log_quiet))
+    keep_freed_memory()
     if not getattr(args, "func", None):
         parser.print_help()
         return 2

@@ -22,6 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from vlr.errors import Interrupted, UserError
+from vlr.memory import keep_freed_memory
 
 if TYPE_CHECKING:
     from vlr.sweep import Trial
@@ -161,6 +162,7 @@ def _init_worker(threads: int, parent: int) -> None:
     watch on the main process, so that a worker whose sweep was killed (SIGKILL, out of
     memory) exits instead of computing a trial nobody collects, then waiting forever."""
     os.environ["NUMBA_NUM_THREADS"] = str(threads)
+    keep_freed_memory()
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     threading.Thread(target=_exit_with_parent, args=(parent,), daemon=True,
                      name="vlr-parent-watch").start()
@@ -198,6 +200,7 @@ def _ray_trial(trial: Trial, out: str, keep_files: bool, threads: int) -> dict[s
     from vlr.sweep import run_one, trial_path
 
     numba.set_num_threads(max(1, min(threads, numba.config.NUMBA_NUM_THREADS)))
+    keep_freed_memory()
     record = run_one(trial, Path(out), keep_files, write=False)
     try:
         write_json_atomic(trial_path(Path(out), trial), record)
