@@ -11,9 +11,11 @@ u0 -> u1 then:
    weighted by the multipliers, which each step updates to k_c (C + J d)), each step held
    to the step limits; the pads' torsional limit mu_t lambda_n follows the normal force
    from step to step;
-3. stops when a step is under the tolerance (taken), or when the steps converge
-   quadratically and the next one would be a tenth of it (|d_k| < |d_k-1| / 10 and
-   |d_k|^3 / |d_k-1|^2 < tol / 10, taken): no evaluation only to confirm;
+3. stops when a step is under the tolerance (taken), or when a step shrank (|d_k| <
+   |d_k-1|) and the next one, were the convergence quadratic at the rate the two show,
+   would be a tenth of the tolerance (|d_k|^3 / |d_k-1|^2 < tol / 10, taken): no
+   evaluation only to confirm. After the prediction, d_k-1 is the prediction's own step,
+   whose error is second order in the action as a Newton step's is in its distance;
 4. if a step grows instead, or a block is not positive definite, goes on with
    Levenberg-Marquardt damping and an Armijo line search on the energy (the particle is
    near a fold or a stop, or a settle's start far from its equilibrium), each step held to
@@ -380,7 +382,7 @@ def newton(x, body, hand, cfg, sc, max_iter, prev):
         if not damped:
             _update_multipliers(cfg, sc, t, n_f, k_n)
             _take(x, sc, t)
-            if (t == 1.0 and prev < math.inf and size < 0.1 * prev
+            if (t == 1.0 and prev < math.inf and size < prev
                     and size ** 3 < 0.1 * prev * prev):
                 return True, evals
             prev = size
