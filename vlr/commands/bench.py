@@ -69,6 +69,13 @@ class Yardstick:
         return time.perf_counter() - t
 
 
+def yardstick(n_particles: int, repeats: int = 5, seed: int = 0) -> float:
+    """Median seconds of `repeats` yardstick solves (`Yardstick`) timed back to back, for a
+    cost quoted beside it (`python -m vlr.tasks.cost`)."""
+    stick = Yardstick(n_particles, seed)
+    return float(np.median([stick.time() for _ in range(repeats)]))
+
+
 def _filter(n_particles: int, seed: int, contacts: str):
     """The filter as `vlr identify` builds it on the sim, initialised on the synthetic world
     holding the apple, that world, and the trial's actions (`vlr.explore.ActionStream`, as
