@@ -489,3 +489,13 @@ def test_resampling_in_place_is_taking_the_same_particles(modelo):
             np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
     with pytest.raises(ValueError, match="sorted"):
         st.copy().resample(np.array([1, 0, 2, 3, 4, 5, 6]))
+    # An array that is a view of another (not the state's own) is copied, not written
+    # through: the array it views keeps its rows.
+    idx = np.array([0, 0, 2, 2, 2, 5, 6])
+    viewed = st.copy()
+    base = np.concatenate([viewed.theta.reshape(7, -1), np.zeros((7, 1))], axis=1)
+    viewed.theta = base[:, :-1].reshape(viewed.theta.shape)
+    before = base.copy()
+    viewed.resample(idx)
+    np.testing.assert_array_equal(viewed.theta, st.take(idx).theta)
+    np.testing.assert_array_equal(base, before)
