@@ -33,3 +33,16 @@ def test_glibc_keeps_freed_memory_once_asked():
     fresh = _faults("")
     # Measured 1,064 against 10,439: the freed temporaries reused, not fresh pages.
     assert kept < fresh / 3
+
+
+def test_the_python_entry_point_asks_too(monkeypatch):
+    """`run_identification`, the README's Python route, sets the allocator as the CLI does."""
+    import vlr.memory
+    from vlr.run import run_identification
+    from vlr.settings import load_settings
+
+    asked = []
+    monkeypatch.setattr(vlr.memory, "keep_freed_memory", lambda: asked.append(1) or True)
+    run_identification(load_settings({"world.backend": "synthetic", "filter.particles": 200,
+                                      "loop.max_iterations": 1}))
+    assert asked

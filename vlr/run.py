@@ -96,8 +96,12 @@ def run_identification(settings: Settings, *, progress: Callable | None = None,
             not closed here.
     """
     from vlr.identify import identify
+    from vlr.memory import keep_freed_memory
     from vlr.results import summarize
 
+    # A script calling this gets the CLI's allocator setting too: the filter's particle-set
+    # temporaries reused, not paged in afresh each iteration (`vlr.memory`).
+    keep_freed_memory()
     t0 = time.perf_counter()
     own = world is None
     w = open_world(settings) if own else world
