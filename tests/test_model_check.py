@@ -93,7 +93,17 @@ def test_the_verdict():
     assert short["surprise_by_iteration"][4] is None
 
 
-@pytest.mark.parametrize("bad", [{"threshold": math.nan}, {"burn_in": -1},
+def test_a_trial_that_weighs_tensions_takes_their_threshold():
+    cfg = ModelCheckConfig(threshold=-1.25, threshold_tensions=-1.15, burn_in=0,
+                           min_actions=3)
+    between = [-1.2] * 5
+    assert verdict(between, cfg)["verdict"] == "inconsistent"
+    out = verdict(between, cfg, tensions=True)
+    assert out["verdict"] == "consistent" and out["threshold"] == -1.15
+
+
+@pytest.mark.parametrize("bad", [{"threshold": math.nan}, {"threshold_tensions": math.inf},
+                                 {"burn_in": -1},
                                  {"min_actions": 0}, {"particles": 4}, {"replicates": 2}])
 def test_bad_settings_are_refused(bad):
     with pytest.raises(ValueError, match=next(iter(bad))):

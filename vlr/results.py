@@ -46,7 +46,8 @@ def summarize(result, model, settings, wall: float, final_truth=None) -> dict:
     # Whether the model explains what the filter saw (`vlr.model_check`): from the
     # filter's own predictions, never the truth.
     out["model_check"] = verdict([r.surprise for r in result.history],
-                                 settings.filter.model_check)
+                                 settings.filter.model_check,
+                                 settings.filter.observation.sigma_tension_n > 0)
     # Per iteration (the grasp's update first): the convergence measure, and against the
     # truth the mean proximal error, so that a table can read either at any iteration.
     out["ci_deg_by_iteration"] = [round(float(r.ci_deg), 4) for r in result.history]
