@@ -206,7 +206,8 @@ def format_model_check(check: dict) -> str:
     if check["verdict"] == "consistent":
         return f"model check: the model explains the observations ({figure})"
     return (f"model check: the model does NOT explain the observations from action "
-            f"{check['first_action_flagged']} on ({figure}): the intervals may miss the truth")
+            f"{check['first_action_flagged']} on ({figure}): the intervals may miss the truth "
+            f"(the remedy, wider likelihood scales: docs/IDENTIFY.md)")
 
 
 def format_table(result, summary: dict, model) -> str:
