@@ -102,6 +102,21 @@ def test_a_trial_that_weighs_tensions_takes_their_threshold():
     assert out["verdict"] == "consistent" and out["threshold"] == -1.15
 
 
+def test_a_sim_trial_reading_tensions_reports_their_threshold():
+    """`result.json`'s model check takes `threshold_tensions` when the likelihood weighs the
+    sim's tensions, `threshold` when it does not (`vlr.results.summarize`)."""
+    from vlr.run import run_identification
+    from vlr.settings import load_settings
+
+    base = {"world.backend": "sim", "world.object": "apple", "filter.particles": 300,
+            "loop.max_iterations": 1, "filter.model_check.threshold": -1.3,
+            "filter.model_check.threshold_tensions": -0.9}
+    for sigma_t, want in ((0.0, -1.3), (0.5, -0.9)):
+        run = run_identification(load_settings(
+            {**base, "filter.observation.sigma_tension_n": sigma_t}))
+        assert run.summary["model_check"]["threshold"] == want
+
+
 @pytest.mark.parametrize("bad", [{"threshold": math.nan}, {"threshold_tensions": math.inf},
                                  {"burn_in": -1},
                                  {"min_actions": 0}, {"particles": 4}, {"replicates": 2}])
