@@ -11,6 +11,8 @@ their sum, "summary" (quantiles for the history) is reported apart. The yardstic
 batched `np.linalg.solve` of P 12x12 systems, the linear algebra of one Newton step for every
 particle: the machine's own speed, so that a ratio to it compares across machines; it is
 timed after each iteration, and the ratio is the median of the iterations' own ratios.
+`--set KEY=VALUE` changes a setting of the tree as `vlr identify --set` does (e.g.
+`--set filter.motion.spin_friction=0`), so that a variant is timed as the filter runs it.
 `--profile` adds what the iterations are made of: Newton-step equivalents per particle (one
 energy, gradient and Hessian evaluation with its arrow solve; mean, median, 99th percentile)
 of the action and of the settle (per jittered particle), the share of particles that failed
@@ -21,7 +23,9 @@ from __future__ import annotations
 
 import argparse
 import time
+from collections.abc import Mapping
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -47,6 +51,9 @@ def register(subparsers: argparse._SubParsersAction) -> None:
                         "energy term")
     p.add_argument("--threads", type=int, default=None,
                    help="numba threads of the particle kernels (default: every core)")
+    p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
+                   help="any setting of the filter, as `vlr identify --set` (e.g. "
+                        "filter.motion.spin_friction=0); on top of the bench's own")
     p.set_defaults(func=run)
 
 
@@ -76,10 +83,10 @@ def yardstick(n_particles: int, repeats: int = 5, seed: int = 0) -> float:
     return float(np.median([stick.time() for _ in range(repeats)]))
 
 
-def _filter(n_particles: int, seed: int, contacts: str):
-    """The filter as `vlr identify` builds it on the sim, initialised on the synthetic world
-    holding the apple, that world, and the trial's actions (`vlr.explore.ActionStream`, as
-    `vlr identify --seed` makes them)."""
+def _filter(n_particles: int, seed: int, contacts: str, sets: Mapping[str, Any] | None = None):
+    """The filter as `vlr identify` builds it on the sim (with the `--set` layer `sets` on
+    top), initialised on the synthetic world holding the apple, that world, and the trial's
+    actions (`vlr.explore.ActionStream`, as `vlr identify --seed` makes them)."""
     from vlr.explore import ActionStream
     from vlr.filter import ParticleFilter
     from vlr.kinematics import HandModel
@@ -90,7 +97,8 @@ def _filter(n_particles: int, seed: int, contacts: str):
     from vlr.world import grasp_guess
 
     settings = load_settings({"world.backend": "sim", "filter.particles": n_particles,
-                              "seed": seed, "filter.motion.rolling": contacts == "rolling"})
+                              "seed": seed, "filter.motion.rolling": contacts == "rolling"},
+                             sets)
     model = HandModel.from_spec(load_hand(settings.world.hand))
     obj = ObjectParams.from_spec(load_object(settings.world.object))
     # The bench times the filter, not the grasp: a snap-through of the world (a grasp at a
@@ -105,11 +113,12 @@ def _filter(n_particles: int, seed: int, contacts: str):
 
 
 def bench_one(n_particles: int, repeats: int, seed: int = 0, contacts: str = "rolling",
-              profile: bool = False) -> dict[str, float]:
+              profile: bool = False, sets: Mapping[str, Any] | None = None
+              ) -> dict[str, float]:
     """Median seconds per phase of `repeats` filter iterations with n_particles, of the
     yardstick timed after each (`Yardstick`), the Newton iterations, and with `profile` the
     iterations' spread and the failures."""
-    pf, world, actions = _filter(n_particles, seed, contacts)
+    pf, world, actions = _filter(n_particles, seed, contacts, sets)
     stick = Yardstick(n_particles, seed)
     u = actions.center
     rows = []
@@ -132,7 +141,8 @@ def bench_one(n_particles: int, repeats: int, seed: int = 0, contacts: str = "ro
     return {k: float(np.median([r[k] for r in rows])) for k in rows[0]}
 
 
-def term_costs(n_particles: int, seed: int = 0, repeats: int = 5) -> dict[str, float]:
+def term_costs(n_particles: int, seed: int = 0, repeats: int = 5,
+               sets: Mapping[str, Any] | None = None) -> dict[str, float]:
     """Microseconds per particle of one energy evaluation (energy, gradient and Hessian, the
     contacts' start included) with each term alone, with the contacts pinned, and with all
     of the filter's terms, on n_particles copies of the bench's particles (so that the
@@ -144,7 +154,7 @@ def term_costs(n_particles: int, seed: int = 0, repeats: int = 5) -> dict[str, f
     from vlr.kernels.solve import evaluate_batch
     from vlr.motion import TERMS
 
-    pf, _, _ = _filter(min(n_particles, 6_000), seed, "rolling")
+    pf, _, _ = _filter(min(n_particles, 6_000), seed, "rolling", sets)
     m = pf.motion
     st = pf.state.take(np.resize(np.arange(pf.state.n), n_particles))  # n_particles of them
     ps = m.particles(st)
@@ -184,13 +194,22 @@ def run(args: argparse.Namespace) -> int:
     from vlr import smoke
     from vlr.io import check_output_file, write_json_atomic
     from vlr.kernels.solve import solve_batch  # noqa: F401  (compile/load the cache)
+    from vlr.settings import load_settings, parse_assignment
 
+    sets = dict(parse_assignment(t) for t in args.set)
+    own = {"filter.particles": "--particles", "seed": "--seed",
+           "filter.motion.rolling": "--contacts", "world.backend": "the bench's own world"}
+    for key in sets:
+        if key in own:
+            raise UserError(f"--set {key}: vlr bench sets it ({own[key]})")
+    load_settings({"world.backend": "sim"}, sets)  # a bad key or value ends here, in one line
     if args.json is not None:
         check_output_file(args.json, "--json")
 
     results: dict[int, dict[str, float]] = {}
     print(f"{args.contacts} contacts, the synthetic world holding the apple, the sim's "
-          f"filter settings, {numba.get_num_threads()} of {cores} threads; seconds are "
+          f"filter settings{''.join(f', {t}' for t in args.set)}, "
+          f"{numba.get_num_threads()} of {cores} threads; seconds are "
           "medians over the iterations")
     print(f"{'particles':>10} " + " ".join(f"{k:>11}" for k in (*PHASES, "total"))
           + f" {'yardstick':>10} {'ratio':>6}   Newton steps (action, settle)")
@@ -198,7 +217,7 @@ def run(args: argparse.Namespace) -> int:
     counts = dict.fromkeys(smoke.cap(n, smoke.BENCH_PARTICLES) for n in args.particles)
     repeats = smoke.cap(args.repeats, 1)
     for n in counts:
-        med = bench_one(n, repeats, args.seed, args.contacts, args.profile)
+        med = bench_one(n, repeats, args.seed, args.contacts, args.profile, sets)
         results[n] = med
         print(f"{n:>10} " + " ".join(f"{med[k]:>10.4f}s" for k in (*PHASES, "total"))
               + f" {med['yardstick']:>9.4f}s {med['ratio']:>6.1f}   "
@@ -219,12 +238,13 @@ def run(args: argparse.Namespace) -> int:
                   f"{med['failed_share']:.2%}, followed {med['followed_share']:.2%}; "
                   f"{med['motion'] / max(med['action_mean'], 1e-9) / n * 1e6:.2f} us per "
                   "particle-step of the action")
-        costs = term_costs(60_000, args.seed)
+        costs = term_costs(60_000, args.seed, sets=sets)
         print("\none energy evaluation per particle [us]: "
               + ", ".join(f"{k} {v:.2f}" for k, v in costs.items()))
     if args.json is not None:
         write_json_atomic(args.json, {
             "contacts": args.contacts,
+            "settings": sets,
             "threads": numba.get_num_threads(),
             "seconds_per_iteration": {str(n): r["total"] for n, r in results.items()},
             "yardstick_seconds": {str(n): r["yardstick"] for n, r in results.items()},
