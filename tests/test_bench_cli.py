@@ -49,16 +49,19 @@ def test_bench_times_the_settings_it_is_given(tmp_path, capsys):
     where the defaults' 99th percentile takes more (14 measured)."""
     runs = {}
     for name, sets in (("default", []), ("capped", ["--set", "filter.motion.max_iter=1",
-                                                     "--set", "filter.motion.follow_substeps=0"])):
+                                                     "--set", "filter.motion.follow_substeps=0",
+                                                     "--set", "world.object=wine_glass"])):
         out = tmp_path / f"{name}.json"
         assert main(["bench", "--particles", "200", "--repeats", "1", "--profile", *sets,
                      "--json", str(out)]) == 0
         runs[name] = json.loads(out.read_text())
+        holding = capsys.readouterr().out.splitlines()[0]
+        assert ("wine_glass" in holding) == (name == "capped"), holding
     assert runs["capped"]["settings"] == {"filter.motion.max_iter": 1,
-                                          "filter.motion.follow_substeps": 0}
+                                          "filter.motion.follow_substeps": 0,
+                                          "world.object": "wine_glass"}
     assert runs["capped"]["medians"]["200"]["action_p99"] <= 4
     assert runs["default"]["medians"]["200"]["action_p99"] > 4
-    capsys.readouterr()
     # A key the bench sets itself, or one that does not exist, is one line and no file.
     out = tmp_path / "bad.json"
     assert main(["bench", "--set", "filter.particles=5", "--json", str(out)]) == 2
