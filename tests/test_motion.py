@@ -499,3 +499,31 @@ def test_resampling_in_place_is_taking_the_same_particles(modelo):
     viewed.resample(idx)
     np.testing.assert_array_equal(viewed.theta, st.take(idx).theta)
     np.testing.assert_array_equal(base, before)
+
+
+def test_a_sliding_grasp_ends_at_its_own_equilibrium(modelo):
+    """After actions in which the pads slide, the particle is at equilibrium as the next
+    solve reads it: an action of no command change leaves it where it is, its contacts'
+    normal forces the same (`contacts.rolled` carries the stretch in the end's tangent
+    plane; its part along the normal would read as gap: newtons at a slide's stretch).
+    The test grasp holds its object with tangential forces up to 3x the normal ones, so
+    mu 4 starts it inside the cone."""
+    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
+    _, st, u0 = grasp(modelo, config=ROLL)
+    MotionModel(modelo, obj, ROLL).solve(st, u0)
+    mm = MotionModel(modelo, obj, replace(ROLL, friction=4.0))
+    u = u0
+    for du in ([1.8e-4, -0.9e-4, 0.6e-4], [-1.2e-4, 1.5e-4, -0.9e-4], [0.9e-4, -1.5e-4, 1.2e-4]):
+        status, _ = mm.solve(st, u + du, u_from=u)
+        assert status[0] == 0
+        u = u + du
+    # A stretch on the friction's scale (its stick zone, 0.1 mm), not the stick's (um).
+    assert np.linalg.norm(st.contact_residuals(modelo)[0], axis=1).max() > 5e-5
+    before = st.copy()
+    forces = mm._primal_multipliers(st, 0, u, st.theta[0], st.pos[0], st.rot[0])
+    status, _ = mm.solve(st, u, u_from=u)
+    assert status[0] == 0
+    assert np.abs(st.pos - before.pos).max() < 2e-5
+    assert np.abs(st.theta - before.theta).max() < 1e-3
+    after = mm._primal_multipliers(st, 0, u, st.theta[0], st.pos[0], st.rot[0])
+    np.testing.assert_allclose(after[:, 0], forces[:, 0], atol=0.05)

@@ -891,7 +891,12 @@ def rolled(x, body, hand, i, sc):
     (body.nrm[i], in D) and anchor (body.anc[i], in O) where the pad now touches the
     primitive: the anchor is the contact on the object less the stretch (`sc.vals[i, 1:]`,
     palm), so that the next solve reads the same gap (the same local centre) and the same
-    stretch: the forces carry over. sc's chain is filled for finger i at x."""
+    stretch: the forces carry over. The stick's stretch is a spring as stiff as the gap's
+    (k_c both), carried whole whichever way the roll turned the normal; a sliding pad's
+    (its limit held, `contacts.friction`) is the friction's tangential variable, tenths of
+    a millimetre, carried in the tangent plane of the end's normal: its part along the
+    normal would read as gap at the next start, newtons of normal force. sc's chain is
+    filled for finger i at x."""
     th, p, R = x
     seg, nrm, anc = body.seg, body.nrm, body.anc
     ctx, vals, KO, RD = sc.ctx, sc.vals, sc.KO, sc.RD
@@ -907,7 +912,13 @@ def rolled(x, body, hand, i, sc):
     koy = R[0, 1] * vx + R[1, 1] * vy + R[2, 1] * vz
     koz = R[0, 2] * vx + R[1, 2] * vy + R[2, 2] * vz
     g, mx, my, mz, _ = _primitive(kind, ctx, i, r, kox, koy, koz, KO)
+    npx = R[0, 0] * mx + R[0, 1] * my + R[0, 2] * mz
+    npy = R[1, 0] * mx + R[1, 1] * my + R[1, 2] * mz
+    npz = R[2, 0] * mx + R[2, 1] * my + R[2, 2] * mz
     zx, zy, zz = vals[i, 1], vals[i, 2], vals[i, 3]
+    if math.isfinite(ctx[i, CTX_CAP]):
+        zn = zx * npx + zy * npy + zz * npz
+        zx, zy, zz = zx - zn * npx, zy - zn * npy, zz - zn * npz
     anc[i, 0] = kox - (g + r) * mx - (R[0, 0] * zx + R[1, 0] * zy + R[2, 0] * zz)
     anc[i, 1] = koy - (g + r) * my - (R[0, 1] * zx + R[1, 1] * zy + R[2, 1] * zz)
     anc[i, 2] = koz - (g + r) * mz - (R[0, 2] * zx + R[1, 2] * zy + R[2, 2] * zz)
@@ -915,8 +926,5 @@ def rolled(x, body, hand, i, sc):
     for k in range(k_n):
         phi += th[i, k]
     distal_rotation(hand, i, phi, RD)
-    npx = R[0, 0] * mx + R[0, 1] * my + R[0, 2] * mz
-    npy = R[1, 0] * mx + R[1, 1] * my + R[1, 2] * mz
-    npz = R[2, 0] * mx + R[2, 1] * my + R[2, 2] * mz
     for b in range(3):
         nrm[i, b] = -(RD[0, b] * npx + RD[1, b] * npy + RD[2, b] * npz)
