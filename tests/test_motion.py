@@ -527,3 +527,19 @@ def test_a_sliding_grasp_ends_at_its_own_equilibrium(modelo):
     assert np.abs(st.theta - before.theta).max() < 1e-3
     after = mm._primal_multipliers(st, 0, u, st.theta[0], st.pos[0], st.rot[0])
     np.testing.assert_allclose(after[:, 0], forces[:, 0], atol=0.05)
+
+
+def test_a_slide_that_runs_away_stops_early_and_is_not_followed(modelo):
+    """With the pads sliding, an action whose pads cannot hold the object (mu 0.3 on the
+    test grasp, whose tangential forces reach 3x the normal ones) fails once its iterate
+    leaves the jump limits, before its evaluations run out, and is not followed up in finer
+    steps (a slide running away holds on no path); the stick moves it in a few steps."""
+    obj = ObjectParams(mass=OBJ.mass, com=OBJ.com, surface=LocalSurface("sphere", 0.04))
+    _, st, u0 = grasp(modelo, config=ROLL)
+    MotionModel(modelo, obj, ROLL).solve(st, u0)
+    u1 = u0 + np.array([1.8e-4, -0.9e-4, 0.6e-4])
+    sliding = MotionModel(modelo, obj, replace(ROLL, friction=0.3))
+    status, evals = sliding.solve(st.copy(), u1, u_from=u0)
+    assert status[0] != 0 and evals[0] < ROLL.max_iter and not sliding.followed[0]
+    status, evals = MotionModel(modelo, obj, ROLL).solve(st.copy(), u1, u_from=u0)
+    assert status[0] == 0 and evals[0] <= 4

@@ -403,6 +403,12 @@ class GraspFilter:
         # A settle has no history: the pads' spin, an action's, does not hold it.
         self._project_cfg = replace(self.config.motion, jump_theta=self.config.init_jump_theta,
                                     jump_pos=0.05, spin_friction=0.0)
+        if self.config.motion.friction is not None:
+            # With the pads sliding, a settle that travels further than an action may is a
+            # slide running away (docs/DECISIONS.md, the pads' sliding).
+            self._project_cfg = replace(self._project_cfg,
+                                        jump_theta=self.config.motion.jump_theta,
+                                        jump_pos=self.config.motion.jump_pos)
         self.project_status = np.zeros(5, dtype=np.int64)
         self.newton_iterations: dict[str, float] = {}
         self.recoveries = 0  # times every hypothesis failed and the prior was drawn again
