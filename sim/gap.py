@@ -298,8 +298,9 @@ def measure_gap(rec: Recording, terms: tuple[str, ...], settings: GapSettings,
                 spin_friction: float = 0.0) -> dict:
     """Per-action, static and drift gap of the motion model with `terms`, rolling or pinned
     contacts, the pads' sliding friction mu `friction` (None: none) and torsional friction
-    mu_t `spin_friction` [m] (module docstring). The settles are frictionless, as the
-    filter's are: the pads' friction acts over an action."""
+    mu_t `spin_friction` [m] (module docstring). The settles to the true states are
+    frictionless (the model's own equilibrium there): the pads' friction acts over the
+    actions measured."""
     model = HandModel.from_spec(rec.hand_spec)
     obj = ObjectParams.from_spec(rec.object_spec)
     # The turn's axis runs from the thumb (`vlr.observation.grasp_turn`), as the filter's
