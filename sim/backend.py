@@ -420,7 +420,7 @@ class SimWorldOptions:
 
 
 def _backend():
-    from vlr.sim.pads import TORSION_FRICTION
+    from vlr.sim.pads import FILTER_SLIDE_FRICTION, TORSION_FRICTION
 
     from vlr.backends import Backend
 
@@ -432,6 +432,7 @@ def _backend():
                   "filter.observation.sigma_rot_deg": 0.4,
                   "filter.observation.sigma_turn_deg": 1.0,
                   "filter.motion.limit_stiffness": 17.0,
+                  "filter.motion.friction": FILTER_SLIDE_FRICTION,
                   "filter.motion.spin_friction": TORSION_FRICTION,
                   "filter.guess_theta_deg": [-10.0, 15.0],
                   "filter.theta_spread_deg": 10.0})

@@ -40,7 +40,7 @@ from dataclasses import dataclass, field, replace
 
 import numpy as np
 from vlr.sim.gap_fit import profile_unknown
-from vlr.sim.pads import SLIDE_FRICTION, TORSION_FRICTION
+from vlr.sim.pads import FILTER_SLIDE_FRICTION, TORSION_FRICTION
 
 from vlr.errors import UserError
 from vlr.explore import ActionStream
@@ -63,14 +63,15 @@ _ALL = _BASE + ("link_gravity", "object_gravity")
 # Model terms switched on in turn, each a setting of the one motion model (`vlr.motion.
 # MotionConfig`): (name, energy terms, rolling contacts, the pads' sliding friction mu (None:
 # none), their torsional friction mu_t [m]). The pads' coefficients are the sim's
-# (`vlr.sim.pads`): known, like the pad's radius.
+# (`vlr.sim.pads`): known, like the pad's radius; the sliding's mu is the filter's, twice the
+# sim's (`FILTER_SLIDE_FRICTION`), so that the last rung is the sim identification's model.
 LADDER: tuple[tuple[str, tuple[str, ...], bool, float | None, float], ...] = (
     ("fixed contacts, no weights", _BASE, False, None, 0.0),
     ("+ link weights", _BASE + ("link_gravity",), False, None, 0.0),
     ("+ object weight", _ALL, False, None, 0.0),
     ("+ rolling", _ALL, True, None, 0.0),
     ("+ pad spin", _ALL, True, None, TORSION_FRICTION),
-    ("+ sliding", _ALL, True, SLIDE_FRICTION, TORSION_FRICTION),
+    ("+ sliding", _ALL, True, FILTER_SLIDE_FRICTION, TORSION_FRICTION),
 )
 
 

@@ -83,9 +83,9 @@ def test_gap_cli_writes_json(tmp_path, capsys):
     full = next(c for c in rep["configs"] if c["name"] == rep["filter_rung"])
     assert all(np.isfinite(full[f"open_loop_ratio_{k}"]) and full[f"open_loop_ratio_{k}"] > 0
                for k in ("position_mean", "orientation_mean", "orientation_median"))
-    # The sim identification's model has the pads' torsional friction, not their sliding.
-    assert rep["filter_rung"] == "+ pad spin"
-    assert "+ pad spin (the filter's model)" in capsys.readouterr().out
+    # The sim identification's model has the pads' torsional friction and their sliding.
+    assert rep["filter_rung"] == "+ sliding"
+    assert "+ sliding (the filter's model)" in capsys.readouterr().out
 
 
 @pytest.mark.parametrize("kw", [dict(actions=0), dict(drift_actions=0),
@@ -106,9 +106,9 @@ def test_the_gap_defaults_to_the_sim_identifications_model_and_ramp():
     assert settings.motion == load_settings({"world.backend": "sim"}).filter.motion
     assert settings.motion.rolling and settings.motion.limit_stiffness == 17.0
     assert settings.ramp_time == SimWorldOptions.ramp_time
-    assert settings.motion.spin_friction == 0.001 and settings.motion.friction is None
+    assert settings.motion.spin_friction == 0.001 and settings.motion.friction == 2.0
     rungs = {n: (mu, mu_t) for n, _, _, mu, mu_t in LADDER}
-    assert rungs["+ pad spin"] == (None, 0.001) and rungs["+ sliding"] == (1.0, 0.001)
+    assert rungs["+ pad spin"] == (None, 0.001) and rungs["+ sliding"] == (2.0, 0.001)
 
 
 def test_gap_cli_bad_json_folder(tmp_path, capsys):

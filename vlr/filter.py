@@ -400,22 +400,17 @@ class GraspFilter:
         self.history: list[IterationRecord] = []
         self.iteration = 0
         self.command: np.ndarray | None = None
-        # A settle has no history: the pads' spin, an action's, does not hold it.
+        # A settle has no history: the pads' spin and sliding, an action's, do not hold it;
+        # its contacts are glued (with the pads sliding, from no stretch: `_jitter`).
         self._project_cfg = replace(self.config.motion, jump_theta=self.config.init_jump_theta,
-                                    jump_pos=0.05, spin_friction=0.0)
-        if self.config.motion.friction is not None:
-            # With the pads sliding, a settle that travels further than an action may is a
-            # slide running away (docs/DECISIONS.md, the pads' sliding).
-            self._project_cfg = replace(self._project_cfg,
-                                        jump_theta=self.config.motion.jump_theta,
-                                        jump_pos=self.config.motion.jump_pos)
+                                    jump_pos=0.05, spin_friction=0.0, friction=None)
         self.project_status = np.zeros(5, dtype=np.int64)
         self.newton_iterations: dict[str, float] = {}
         self.recoveries = 0  # times every hypothesis failed and the prior was drawn again
         self.prior_redraws = 0  # prior draws of which no particle settled (`initialize`)
         self._init_cfg = replace(self.config.motion, jump_theta=self.config.init_jump_theta,
                                  jump_pos=0.05, max_iter=max(self.config.motion.max_iter, 100),
-                                 spin_friction=0.0)
+                                 spin_friction=0.0, friction=None)
         # Seconds per phase of the last iteration (motion, observation, weights, resampling,
         # jitter, summary) and what its solves took, for `vlr bench`.
         self.timings: dict[str, float] = {}
@@ -732,11 +727,15 @@ class ParticleFilter(GraspFilter):
         """Liu-West kernel (`_kernel`) on `self.state` at `self.command`, then re-anchor and
         settle (`_project`). Returns the rows that moved (None: all)."""
         state = self.state
-        residuals = state.contact_residuals(self.model)
+        # The POM keeps its pose; the anchors follow the jittered contacts, each contact
+        # keeping its stretch (the grasp force). With the pads sliding, from no stretch
+        # instead: the hypothesis lets its grasp's internal forces go and its glued settle
+        # finds them as the prior's does (the stretch a slide leaves sits on the cone's edge,
+        # and the next action's slide runs away: docs/DECISIONS.md, the internal forces).
+        residuals = (state.contact_residuals(self.model)
+                     if self.config.motion.friction is None else None)
         x_new, moved = self._kernel(x, parents)
         self.unpack(x_new, state)
-        # The POM keeps its pose; the anchors follow the jittered contacts, each contact
-        # keeping its penalty stretch (the grasp force).
         state.anchor_to_pose(self.model, residuals)
         self._project(state, moved)
         return moved
