@@ -54,7 +54,8 @@ class ModelCheckConfig:
             standard deviations (1.4826 times the median absolute deviation) of the
             statistic over the known hand's trials on the paper's four objects, measured
             for the likelihood's scales it goes with (the default: the sim's, median -1.49
-            and robust SD 0.08 over 20 trials; docs/RESULTS.md 10). A backend with other
+            and robust SD 0.08 over 20 trials, measured without the pads' sliding; with it
+            the rule gives -1.38, not adopted: docs/RESULTS.md 10). A backend with other
             scales sets its own (`vlr.backends`).
         threshold_tensions: the same, for trials whose likelihood also weighs the tendons'
             tensions (`filter.observation.sigma_tension_n` > 0): their replicates carry the

@@ -79,10 +79,11 @@ class MotionConfig:
         friction: the pads' Coulomb friction coefficient mu with rolling contacts: a
             contact's tangential force is at most mu times its normal force, beyond which
             it slides. A sliding solve that leaves the jump limits stops there (a slide
-            running away), is not followed up in finer steps, and the filter's settles keep
-            the action's jump limits (docs/DECISIONS.md, the pads' sliding). The sim's pads
-            have mu 1; the filter holds its hypotheses' grasps only with a margin (mu 2
-            measured). None: the contacts roll and never slide.
+            running away) and is not followed up in finer steps; the filter's settles are
+            glued, and its jittered hypotheses settle from no stretch (`vlr.filter`,
+            docs/DECISIONS.md, the internal forces). The sim's pads have mu 1; the sim's
+            filter holds its hypotheses' grasps with a margin, mu 2 (its default). None: the
+            contacts roll and never slide.
         spin_friction: the pads' torsional friction coefficient mu_t [m] with rolling
             contacts: a pad sticks about its contact normal until the torque reaches mu_t
             times its normal force, then spins (`vlr.kernels.contacts.spin`); over an
