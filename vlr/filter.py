@@ -728,10 +728,12 @@ class ParticleFilter(GraspFilter):
         settle (`_project`). Returns the rows that moved (None: all)."""
         state = self.state
         # The POM keeps its pose; the anchors follow the jittered contacts, each contact
-        # keeping its stretch (the grasp force). With the pads sliding, from no stretch
-        # instead: the hypothesis lets its grasp's internal forces go and its glued settle
-        # finds them as the prior's does (the stretch a slide leaves sits on the cone's edge,
-        # and the next action's slide runs away: docs/DECISIONS.md, the internal forces).
+        # keeping its stretch (the grasp force). With the pads sliding, every particle's
+        # anchors are re-derived from no stretch instead: the grasp's internal forces are let
+        # go at each update (the stretch a slide leaves sits on the cone's edge, and the next
+        # action's slide runs away: docs/DECISIONS.md, the internal forces). The jittered
+        # particles' glued settles find them again, as the prior's does; the others, in
+        # their next action's solve (the stretch is micrometres: k_c is stiff).
         residuals = (state.contact_residuals(self.model)
                      if self.config.motion.friction is None else None)
         x_new, moved = self._kernel(x, parents)

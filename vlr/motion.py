@@ -80,7 +80,7 @@ class MotionConfig:
             contact's tangential force is at most mu times its normal force, beyond which
             it slides. A sliding solve that leaves the jump limits stops there (a slide
             running away) and is not followed up in finer steps; the filter's settles are
-            glued, and its jittered hypotheses settle from no stretch (`vlr.filter`,
+            glued, and at each update every particle's stretch is let go (`vlr.filter`,
             docs/DECISIONS.md, the internal forces). The sim's pads have mu 1; the sim's
             filter holds its hypotheses' grasps with a margin, mu 2 (its default). None: the
             contacts roll and never slide.
