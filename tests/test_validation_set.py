@@ -31,7 +31,7 @@ def _identify(obj: str, **more) -> dict:
 
 # One row per object kind and one new finger, reduced (3,000 particles, 12 actions, seed 0)
 # from docs/sweeps/validation.yaml (60,000, 20 or 35, seeds 0-4; docs/RESULTS.md). Measured
-# at these settings: proximal 0.14 / 0.55 / 0.69 / 1.24 deg, coverage 1.0 within 0.1 deg
+# at these settings: proximal 0.20 / 0.60 / 0.61 / 1.23 deg, coverage 1.0 within 0.1 deg
 # each. Thresholds sit above the measured figures; never loosen one to pass.
 @pytest.mark.slow
 @pytest.mark.parametrize("obj, max_proximal_deg", [
@@ -46,9 +46,9 @@ def test_validation_known_hand(obj, max_proximal_deg):
 @pytest.mark.slow
 def test_validation_nh4_unknown_links():
     # NH4's link after 20 actions is known to about its 12 mm interval's width, so one
-    # seed's error is a draw: 2.5-10.1 mm over seeds 0-5 at 3,000 particles (10.1, 2.7,
-    # 4.7, 7.2, 2.5, 2.5), 0.9-6.0 at 10,000; at 60,000 and 35 actions 1.26 mm
-    # (docs/RESULTS.md). The guard is the mean of six seeds: measured 4.94 mm.
+    # seed's error is a draw: 0.9-10.4 mm over seeds 0-5 at 3,000 particles (10.4, 4.7,
+    # 0.9, 9.7, 3.9, 1.8); at 60,000 and 35 actions 2.39 mm (docs/RESULTS.md). The guard
+    # is the mean of six seeds: measured 5.22 mm.
     rows = [_identify("apple", **{"seed": seed, "world.true_hand": "nh4",
                                   "loop.max_iterations": 20,
                                   "filter.unknowns": ["length:right.proximal",
