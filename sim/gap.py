@@ -55,7 +55,7 @@ from vlr.motion import (
 )
 from vlr.observation import grasp_turn, rotation_error
 
-__all__ = ["LADDER", "filter_rung", "GapSettings", "record_actions", "measure_gap",
+__all__ = ["LADDER", "ladder_for", "filter_rung", "GapSettings", "record_actions", "measure_gap",
            "gap_report", "format_report", "OBJECTS"]
 
 _BASE = ("springs", "tendon", "limits", "contacts")
@@ -73,6 +73,23 @@ LADDER: tuple[tuple[str, tuple[str, ...], bool, float | None, float], ...] = (
     ("+ pad spin", _ALL, True, None, TORSION_FRICTION),
     ("+ sliding", _ALL, True, FILTER_SLIDE_FRICTION, TORSION_FRICTION),
 )
+
+
+def ladder_for(motion: MotionConfig) -> tuple:
+    """`LADDER` with the pads' coefficients of `motion` where it has them: `vlr gap --set
+    filter.motion.friction=1.5` measures the sliding rung at mu 1.5, so that the filter's
+    rung (`filter_rung`) is the model the filter runs with those settings."""
+    spin = motion.spin_friction if motion.spin_friction > 0 else TORSION_FRICTION
+    rungs = []
+    for name, terms, rolling, mu, mu_t in LADDER:
+        if mu is not None:  # the sliding rung: the filter's own pads when it slides
+            sliding = motion.friction is not None
+            mu, mu_t = ((motion.friction, motion.spin_friction) if sliding
+                        else (FILTER_SLIDE_FRICTION, spin))
+        elif mu_t > 0:
+            mu_t = spin
+        rungs.append((name, terms, rolling, mu, mu_t))
+    return tuple(rungs)
 
 
 def filter_rung(motion: MotionConfig) -> str:
@@ -415,9 +432,11 @@ def _drift(motion: MotionModel, settle: MotionConfig, model: HandModel, rec: Rec
             "open_loop_ratio_orientation_median": float(np.nanmedian(r[:, 1]))}
 
 
-def gap_report(settings: GapSettings, ladder: tuple = LADDER) -> dict:
-    """Record the actions once, then measure every rung of `ladder` on them. The top-level
-    ratios are the filter's model's (`filter_rung`), else the last rung's."""
+def gap_report(settings: GapSettings, ladder: tuple | None = None) -> dict:
+    """Record the actions once, then measure every rung of `ladder` (default: `ladder_for`
+    the settings' model) on them. The top-level ratios are the filter's model's
+    (`filter_rung`), else the last rung's."""
+    ladder = ladder_for(settings.motion) if ladder is None else ladder
     t0 = time.perf_counter()
     if settings.fit:
         check_fit(settings)
@@ -425,7 +444,8 @@ def gap_report(settings: GapSettings, ladder: tuple = LADDER) -> dict:
     if len(rec.commands) < 2:
         raise UserError(f"{settings.object}: the grasp was lost at the first action; "
                         "nothing to measure")
-    configs = [{"name": name, **measure_gap(rec, terms, settings, rolling, friction, spin)}
+    configs = [{"name": name, "friction": friction, "spin_friction": spin,
+                **measure_gap(rec, terms, settings, rolling, friction, spin)}
                for name, terms, rolling, friction, spin in ladder]
     full = next((c for c in configs if c["name"] == filter_rung(settings.motion)),
                 configs[-1])
@@ -480,7 +500,8 @@ def format_report(rep: dict) -> str:
     lines = [head, cols]
     for c in rep["configs"]:
         s = c["static"]
-        lines.append(f"{c['name']:28s} {c['ratio_position_mean']:10.3f} "
+        name = c["name"] + (f" (mu {c['friction']:g})" if c.get("friction") is not None else "")
+        lines.append(f"{name:28s} {c['ratio_position_mean']:10.3f} "
                      f"{c['ratio_orientation_mean']:10.3f} {c['drift_ratio']:10.3f} "
                      f"{c['drift_ratio_orientation']:10.3f} {s['position_mm_mean']:10.2f} "
                      f"{s['orientation_deg_mean']:10.2f} {s['joint_deg_mean']:10.2f} "

@@ -43,7 +43,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--set", action="append", default=[], metavar="KEY=VALUE",
                    help="a setting of the model, as `vlr identify --set filter.motion.KEY=V` "
                    "(e.g. filter.motion.limit_stiffness=100), or the sim's "
-                   "world.options.ramp_time")
+                   "world.options.ramp_time; the pads' coefficients set here are the "
+                   "spin and sliding rungs' own")
     p.add_argument("--fit", metavar="UNKNOWN",
                    help="profile the value of an unknown the model wants from the true "
                    "states, on every rung (as --unknown: stiffness:thumb.distal, "

@@ -12,10 +12,20 @@ rolling model's error split along the grasp's turn (`turn`): most of it is the t
 """
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
-from vlr.sim.gap import _ALL, _BASE, LADDER, GapSettings, filter_rung, gap_report, measure_gap
+from vlr.sim.gap import (
+    _ALL,
+    _BASE,
+    LADDER,
+    GapSettings,
+    filter_rung,
+    gap_report,
+    ladder_for,
+    measure_gap,
+)
 
 from vlr.cli import main
 from vlr.errors import UserError
@@ -109,6 +119,18 @@ def test_the_gap_defaults_to_the_sim_identifications_model_and_ramp():
     assert settings.motion.spin_friction == 0.001 and settings.motion.friction == 2.0
     rungs = {n: (mu, mu_t) for n, _, _, mu, mu_t in LADDER}
     assert rungs["+ pad spin"] == (None, 0.001) and rungs["+ sliding"] == (2.0, 0.001)
+    assert ladder_for(settings.motion) == LADDER
+
+
+def test_the_gap_measures_the_pads_the_settings_give():
+    """`--set filter.motion.friction=1.5` is measured at mu 1.5, not the default's 2."""
+    motion = GapSettings().motion
+    rungs = {n: (mu, mu_t) for n, _, _, mu, mu_t in ladder_for(replace(motion, friction=1.5))}
+    assert rungs["+ sliding"] == (1.5, 0.001) and rungs["+ pad spin"] == (None, 0.001)
+    rungs = {n: (mu, mu_t) for n, _, _, mu, mu_t in
+             ladder_for(replace(motion, friction=None, spin_friction=0.002))}
+    assert rungs["+ pad spin"] == (None, 0.002) and rungs["+ sliding"] == (2.0, 0.002)
+    assert rungs["+ rolling"] == (None, 0.0)
 
 
 def test_gap_cli_bad_json_folder(tmp_path, capsys):
