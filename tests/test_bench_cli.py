@@ -66,6 +66,12 @@ def test_bench_times_the_settings_it_is_given(tmp_path, capsys):
     out = tmp_path / "bad.json"
     assert main(["bench", "--set", "filter.particles=5", "--json", str(out)]) == 2
     assert main(["bench", "--set", "filter.motion.nope=1", "--json", str(out)]) == 2
+    # ... and a real setting the bench would silently ignore (the sim's options, the loop's
+    # length) is refused too, not timed as if it had acted.
+    assert main(["bench", "--set", "world.options.ramp_time=0.2", "--json", str(out)]) == 2
+    assert main(["bench", "--set", "loop.max_iterations=5", "--json", str(out)]) == 2
     err = capsys.readouterr().err
     assert "--set filter.particles" in err and "filter.motion.nope" in err
+    assert "--set world.options.ramp_time: vlr bench does not use it" in err
+    assert "--set loop.max_iterations: vlr bench does not use it" in err
     assert "Traceback" not in err and not out.exists()

@@ -12,7 +12,8 @@ batched `np.linalg.solve` of P 12x12 systems, the linear algebra of one Newton s
 particle: the machine's own speed, so that a ratio to it compares across machines; it is
 timed after each iteration, and the ratio is the median of the iterations' own ratios.
 `--set KEY=VALUE` changes a setting of the tree as `vlr identify --set` does (e.g.
-`--set filter.motion.spin_friction=0`), so that a variant is timed as the filter runs it.
+`--set filter.motion.spin_friction=0`), so that a variant is timed as the filter runs it;
+a key the bench does not use (the sim's options, the loop's length) is refused.
 `--profile` adds what the iterations are made of: Newton-step equivalents per particle (one
 energy, gradient and Hessian evaluation with its arrow solve; mean, median, 99th percentile)
 of the action and of the settle (per jittered particle), the share of particles that failed
@@ -200,9 +201,15 @@ def run(args: argparse.Namespace) -> int:
     own = {"filter.particles": "--particles", "seed": "--seed",
            "filter.motion.rolling": "--contacts", "world.backend": "the bench's own world",
            "world.true_hand": "its world holds the filter's own hand"}
+    used = ("filter.", "world.hand", "world.object", "loop.action_range_mm",
+            "loop.action_band_mm")
     for key in sets:
         if key in own:
             raise UserError(f"--set {key}: vlr bench sets it ({own[key]})")
+        if not key.startswith(used):
+            raise UserError(f"--set {key}: vlr bench does not use it (it takes filter.*, "
+                            "world.hand, world.object and loop.action_range_mm / "
+                            "action_band_mm)")
     # A bad key or value ends here, in one line; the object is the settings' (the apple).
     held = load_settings({"world.backend": "sim"}, sets).world.object
     if args.json is not None:
