@@ -12,7 +12,6 @@ from vlr.kinematics import (
     contact_points,
     joint_positions,
     normals_from_angles,
-    pad_normals,
     plane_rotation,
     pom_from_contacts,
     virtual_links,
@@ -92,17 +91,6 @@ def test_normals_round_trip():
     a2, b2 = angles_from_normals(normals_from_angles(a, b))
     np.testing.assert_allclose(a2, a)
     np.testing.assert_allclose(b2, b)
-
-
-def test_pad_normals_point_from_the_pad_centre_to_the_contact(modelo):
-    rng = np.random.default_rng(0)
-    theta = rng.uniform(-0.3, 1.2, (4, 3, 2))
-    normals = normals_from_angles(rng.uniform(-0.5, 0.5, (4, 3)), rng.uniform(-0.5, 0.5, (4, 3)))
-    centre = contact_points(modelo, theta, 0.0 * normals)   # the pad's sphere's centre
-    out = contact_points(modelo, theta, normals) - centre
-    n = pad_normals(modelo, theta, normals)
-    np.testing.assert_allclose(np.linalg.norm(n, axis=-1), 1.0)
-    np.testing.assert_allclose(out, modelo.pad_radius[:, None] * n, atol=1e-12)
 
 
 def test_pom_from_contacts_recovers_pose():

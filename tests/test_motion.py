@@ -360,22 +360,6 @@ def test_reanchoring_keeps_the_grasp_force(modelo):
     assert np.degrees(np.abs(zeroed.theta - theta0).max()) > 0.003  # it relaxes
 
 
-def test_the_squeeze_is_the_stretch_along_the_pads_normals(modelo):
-    """What the sliding filter's jitter keeps of each contact's force (`contact_squeeze`):
-    the normal part of the stretch, the tangential part dropped."""
-    from vlr.kinematics import pad_normals
-
-    _, st, _ = grasp(modelo, n=2)
-    stretch, squeeze = st.contact_residuals(modelo), st.contact_squeeze(modelo)
-    n = pad_normals(modelo, st.theta, st.normals)
-    along = np.einsum("pni,pni->pn", stretch, n)
-    assert np.abs(along).min() > 1e-7   # the grasp presses every pad
-    np.testing.assert_allclose(squeeze, along[..., None] * n, atol=1e-15)
-    tangential = stretch - squeeze
-    assert np.abs(np.einsum("pni,pni->pn", tangential, n)).max() < 1e-15
-    assert np.abs(tangential).max() > 1e-8   # there was a tangential part to drop
-
-
 @pytest.mark.parametrize("kw, message", [
     (dict(terms=("springs", "rolling")), "rolling contacts: rolling=True"),
     (dict(terms=("springs", "tendon")), "needs 'contacts'"),

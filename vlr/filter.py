@@ -728,16 +728,14 @@ class ParticleFilter(GraspFilter):
         settle (`_project`). Returns the rows that moved (None: all)."""
         state = self.state
         # The POM keeps its pose; the anchors follow the jittered contacts, each contact
-        # keeping its stretch (the grasp force). With the pads sliding, each contact keeps
-        # only its squeeze, the stretch along its pad's normal: the tangential internal
-        # forces are let go at each update (the stretch a slide leaves sits on the cone's
-        # edge, and the next action's slide runs away), the squeeze is kept (a particle left
-        # with no stretch at all slid away in its next action far more often:
-        # docs/DECISIONS.md, the squeeze). The jittered particles' glued settles find the
-        # tangential forces again; the others, in their next action's solve.
+        # keeping its stretch (the grasp force). With the pads sliding, every particle's
+        # anchors are re-derived from no stretch instead: the grasp's internal forces are let
+        # go at each update (the stretch a slide leaves sits on the cone's edge, and the next
+        # action's slide runs away: docs/DECISIONS.md, the internal forces). The jittered
+        # particles' glued settles find them again, as the prior's does; the others, in
+        # their next action's solve (the stretch is micrometres: k_c is stiff).
         residuals = (state.contact_residuals(self.model)
-                     if self.config.motion.friction is None
-                     else state.contact_squeeze(self.model))
+                     if self.config.motion.friction is None else None)
         x_new, moved = self._kernel(x, parents)
         self.unpack(x_new, state)
         state.anchor_to_pose(self.model, residuals)

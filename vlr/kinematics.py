@@ -35,7 +35,6 @@ __all__ = [
     "joint_positions",
     "contact_points",
     "contact_in_distal",
-    "pad_normals",
     "normals_from_angles",
     "angles_from_normals",
     "pom_from_contacts",
@@ -316,14 +315,6 @@ def contact_points(model: HandModel, theta: np.ndarray, normals: np.ndarray,
     phi = np.sum(theta, axis=-1)
     c_f = np.einsum("...ab,...b->...a", plane_rotation(phi), c_d)
     return q + np.einsum("nab,...nb->...na", model.base_rot, c_f)
-
-
-def pad_normals(model: HandModel, theta: np.ndarray, normals: np.ndarray) -> np.ndarray:
-    """The pads' unit normals at their contacts in the palm frame, (..., N, 3): the normal n
-    in D turned by the finger's flexion and its mount (Eq. 2's rotations)."""
-    phi = np.sum(np.asarray(theta, dtype=float), axis=-1)
-    in_f = np.einsum("...ab,...b->...a", plane_rotation(phi), np.asarray(normals, dtype=float))
-    return np.einsum("nab,...nb->...na", model.base_rot, in_f)
 
 
 def normals_from_angles(alpha: np.ndarray, beta: np.ndarray) -> np.ndarray:

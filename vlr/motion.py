@@ -44,7 +44,7 @@ from vlr.kernels import solve as ksolve
 from vlr.kernels.contacts import STICK_ZONE
 from vlr.kernels.frames import object_points, palm_points
 from vlr.kernels.resample import gather_sorted
-from vlr.kinematics import HandModel, contact_in_distal, contact_points, pad_normals
+from vlr.kinematics import HandModel, contact_in_distal, contact_points
 from vlr.spec import ObjectSpec
 from vlr.surface import FLAT_CURVATURE, LocalSurface, contact_radii
 
@@ -354,14 +354,6 @@ class ParticleState:
         """(P, N, 3) anchor minus contact point in the palm frame, R a_i + p - p_i [m]: the
         stretch of the contacts (Eq. 8 as a stiff spring), k_c times it the force."""
         return palm_points(self.anchors, self.pos, self.rot) - self.contacts(model)
-
-    def contact_squeeze(self, model: HandModel) -> np.ndarray:
-        """(P, N, 3) the contacts' stretch along each pad's normal (`contact_residuals`
-        projected on `vlr.kinematics.pad_normals`): the grasp's squeeze without the
-        tangential internal forces, which friction's history decides (docs/METHOD.md 8.2)."""
-        r = self.contact_residuals(model)
-        n = pad_normals(model, self.theta, self.normals)
-        return np.einsum("pni,pni->pn", r, n)[..., None] * n
 
 
 def _map(a: np.ndarray | None, f) -> np.ndarray | None:
