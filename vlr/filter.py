@@ -733,7 +733,8 @@ class ParticleFilter(GraspFilter):
         # go at each update (the stretch a slide leaves sits on the cone's edge, and the next
         # action's slide runs away: docs/DECISIONS.md, the internal forces). The jittered
         # particles' glued settles find them again, as the prior's does; the others, in
-        # their next action's solve (the stretch is micrometres: k_c is stiff).
+        # their next action's solve, or they slide away there (docs/DECISIONS.md, the
+        # internal forces let go whole: keeping their squeeze lost on the joints).
         residuals = (state.contact_residuals(self.model)
                      if self.config.motion.friction is None else None)
         x_new, moved = self._kernel(x, parents)
