@@ -520,12 +520,12 @@ def test_a_sliding_grasp_ends_at_its_own_equilibrium(modelo):
     # A stretch on the friction's scale (its stick zone, 0.1 mm), not the stick's (um).
     assert np.linalg.norm(st.contact_residuals(modelo)[0], axis=1).max() > 5e-5
     before = st.copy()
-    forces = mm._primal_multipliers(st, 0, u, st.theta[0], st.pos[0], st.rot[0])
+    forces = mm.contact_forces(st, 0, u, st.theta[0], st.pos[0], st.rot[0])
     status, _ = mm.solve(st, u, u_from=u)
     assert status[0] == 0
     assert np.abs(st.pos - before.pos).max() < 2e-5
     assert np.abs(st.theta - before.theta).max() < 1e-3
-    after = mm._primal_multipliers(st, 0, u, st.theta[0], st.pos[0], st.rot[0])
+    after = mm.contact_forces(st, 0, u, st.theta[0], st.pos[0], st.rot[0])
     np.testing.assert_allclose(after[:, 0], forces[:, 0], atol=0.05)
 
 

@@ -510,7 +510,7 @@ class MotionModel:
         R = np.ascontiguousarray(state.rot[q] if rot is None else rot, dtype=float)
         u = np.asarray(u, dtype=float)
         if isinstance(multipliers, str):
-            lam = self._primal_multipliers(state, q, u, th, p, R)
+            lam = self.contact_forces(state, q, u, th, p, R)
         elif multipliers is None:
             lam = np.full((nf, rec.N_LAM), np.nan)
         else:
@@ -537,9 +537,11 @@ class MotionModel:
         (`vlr.kernels.records.Model`)."""
         return rec.Model(self._hand, self._surface, self._settings)
 
-    def _primal_multipliers(self, state, q, u, th, p, R) -> np.ndarray:
-        """The contacts' forces at (th, p, R): k_c g and the stretch's force (the stick's
-        k_c z, or the pads' friction's at the start's normal force)."""
+    def contact_forces(self, state: ParticleState, q: int, u: np.ndarray, th: np.ndarray,
+                       p: np.ndarray, R: np.ndarray) -> np.ndarray:
+        """Particle q's contacts' forces at (th, p, R), (N, 4) [N]: k_c g and the stretch's
+        force (the stick's k_c z, or the pads' friction's at the start's normal force). For
+        tests and diagnostics."""
         cfg = self.config
         kc = cfg.contact_stiffness
         nan = np.full((self.model.n_fingers, rec.N_LAM), np.nan)
