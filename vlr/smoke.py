@@ -5,8 +5,10 @@ with this one environment variable set and no other change: no flag the example 
 it set, each size a command would spend minutes on is capped where the command reads it:
 
 - the settings tree (`vlr.settings.load_settings`): `filter.particles` at most `PARTICLES`,
-  the loop's actions (`loop.max_iterations`, `loop.min_iterations`) at most `ACTIONS`;
-- seeds (`vlr.sweep.parse_seeds`): the first one only; a sweep's trials: the first `TRIALS`;
+  the loop's actions (`loop.max_iterations`, `loop.min_iterations`) at most `ACTIONS`, the
+  model check's burn-in and minimum actions within them (a verdict, not "undecided");
+- seeds (`vlr.sweep.parse_seeds`): the first one only; a sweep's trials: the first `TRIALS`,
+  and as many are enough for `vlr model-check-calibrate`;
 - a task's episode: at most `TASK_MOVES` moves; `vlr bench`: particle counts at most
   `BENCH_PARTICLES`, one timed iteration each; `vlr gap` and `vlr crb`: `ACTIONS` actions.
 
@@ -55,4 +57,9 @@ def settings_layer(flat: dict) -> dict:
     for key in ("loop.min_iterations", "loop.max_iterations"):   # min first: min <= max
         if flat.get(key, 0) > ACTIONS:
             layer[key] = ACTIONS
+    if flat.get("filter.model_check.burn_in", 0) + flat.get("filter.model_check.min_actions",
+                                                            0) > ACTIONS:
+        layer["filter.model_check.burn_in"] = 0
+        layer["filter.model_check.min_actions"] = min(flat["filter.model_check.min_actions"],
+                                                      ACTIONS)
     return layer
