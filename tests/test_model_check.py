@@ -164,8 +164,7 @@ def _synthetic_check(seed: int, particles: int, **layer) -> dict:
 
 def test_the_known_hand_is_consistent():
     """The model the world is made of explains it: measured -1.11 / -1.17 / -1.18 against
-    the synthetic world's threshold -0.38 (6,000 particles; at 1,000 the filter itself
-    loses coverage and the check flags it)."""
+    the synthetic world's threshold -0.38 (6,000 particles)."""
     for seed in range(3):
         check = _synthetic_check(seed, 6000)
         assert check["verdict"] == "consistent", (seed, check["statistic"])
