@@ -18,7 +18,8 @@ from vlr.errors import UserError
 
 __all__ = ["register", "table_rows", "CSV_COLUMNS"]
 
-CSV_COLUMNS = ("rung", "object", "seed", "ramp_time", "start", "actions", "ratio_position",
+CSV_COLUMNS = ("rung", "friction", "spin_friction", "object", "seed", "ramp_time", "start",
+               "actions", "ratio_position",
                "ratio_orientation", "pooled_position", "pooled_orientation", "drift_position",
                "drift_orientation", "failed_solves")
 
@@ -79,8 +80,10 @@ def _pooled(per_action: list[dict], kind: str) -> float:
 
 
 def table_rows(rep: dict) -> list[dict]:
-    """One CSV row (`CSV_COLUMNS`) per rung of a `sim.gap.gap_report`."""
-    return [{"rung": c["name"], "object": rep["object"], "seed": rep["seed"],
+    """One CSV row (`CSV_COLUMNS`) per rung of a `sim.gap.gap_report`, with the pads'
+    sliding mu (empty: none) and torsional mu_t [m] it was measured at."""
+    return [{"rung": c["name"], "friction": c.get("friction"),
+             "spin_friction": c.get("spin_friction"), "object": rep["object"], "seed": rep["seed"],
              "ramp_time": rep["ramp_time"], "start": rep["start"], "actions": rep["actions"],
              "ratio_position": round(c["ratio_position_mean"], 4),
              "ratio_orientation": round(c["ratio_orientation_mean"], 4),

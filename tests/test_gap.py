@@ -11,6 +11,7 @@ model's without the term they guard, so losing rolling (or a weight) fails them.
 rolling model's error split along the grasp's turn (`turn`): most of it is the turn.
 """
 
+import csv
 import json
 from dataclasses import replace
 
@@ -77,10 +78,10 @@ def test_rolling_closes_most_of_the_apple_gap(apple_gap):
     assert turn["rest_position_mm_rms"] < 0.45 * turn["position_mm_rms"]
 
 
-def test_gap_cli_writes_json(tmp_path, capsys):
-    out = tmp_path / "gap.json"
+def test_gap_cli_writes_json_and_csv(tmp_path, capsys):
+    out, table = tmp_path / "gap.json", tmp_path / "gap.csv"
     assert main(["gap", "--object", "gelatin_box", "--actions", "3", "--drift-actions", "3",
-                 "--json", str(out)]) == 0
+                 "--json", str(out), "--csv", str(table)]) == 0
     rep = json.loads(out.read_text())
     assert rep["object"] == "gelatin_box" and rep["actions"] == 3
     assert [c["name"] for c in rep["configs"]] == [name for name, *_ in LADDER]
@@ -96,6 +97,12 @@ def test_gap_cli_writes_json(tmp_path, capsys):
     # The sim identification's model has the pads' torsional friction and their sliding.
     assert rep["filter_rung"] == "+ sliding"
     assert "+ sliding (the filter's model)" in capsys.readouterr().out
+    # The table names each rung's pads' coefficients, as the JSON does.
+    rows = list(csv.DictReader(table.open()))
+    assert [r["rung"] for r in rows] == [c["name"] for c in rep["configs"]]
+    for r, c in zip(rows, rep["configs"], strict=True):
+        assert r["friction"] == ("" if c["friction"] is None else str(c["friction"]))
+        assert r["spin_friction"] == str(c["spin_friction"])
 
 
 @pytest.mark.parametrize("kw", [dict(actions=0), dict(drift_actions=0),
