@@ -58,8 +58,8 @@ class ModelCheckConfig:
             scales it goes with by `threshold_by_rule` over the known hand's trials on the
             paper's four objects (the default: the sim's, median -1.56, the objects' and the
             seeds' spreads 0.07 and 0.07, 40 trials at 60,000 particles, seeds 0-9;
-            docs/RESULTS.md 10). A backend with other
-            scales sets its own (`vlr.backends`; `vlr model-check-calibrate` measures it).
+            docs/RESULTS.md 10). A backend with other scales sets its own (`vlr.backends`;
+            `vlr model-check-calibrate` measures it).
         threshold_tensions: the same, for trials whose likelihood also weighs the tendons'
             tensions (`filter.observation.sigma_tension_n` > 0): their replicates carry the
             tensions' noise too, which moves the statistic's null (the sim's with 0.25 N

@@ -88,8 +88,8 @@ def _records(path: Path, group: str | None = None) -> list[tuple[Path, dict[str,
 
 def thresholds(paths: list[str], group: str | None = None) -> dict[str, Any]:
     """The rule's thresholds over the trials at `paths`: per kind ("threshold" for the camera
-    alone, "threshold_tensions" with the tensions weighed) the trials, their statistics'
-    median and SD and the threshold; and the scales they share."""
+    alone, "threshold_tensions" with the tensions weighed) the trials, their objects, their
+    statistics' median and the threshold; and the scales they share."""
     from vlr import smoke
     from vlr.model_check import MIN_CALIBRATION_TRIALS, threshold_by_rule
 
