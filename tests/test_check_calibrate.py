@@ -96,6 +96,7 @@ def test_a_sweeps_trials_of_one_group_and_only_finished_ones(tmp_path, capsys):
     ("few", "4 decided trials on 2 object(s) for threshold"),
     ("missing", "no such file or folder"),
     ("not a result", "no model_check and settings"),
+    ("bad statistic", "model_check.statistic = 'x' is not a number"),
 ])
 def test_bad_input_is_one_line_and_no_file(tmp_path, capsys, case, message):
     runs = _identify_runs(tmp_path, CAMERA[:4] if case == "few" else CAMERA)
@@ -107,6 +108,8 @@ def test_bad_input_is_one_line_and_no_file(tmp_path, capsys, case, message):
         (tmp_path / "run0.56-1" / "result.json").write_text(json.dumps(_result(-1.5, 0.3)))
     elif case == "missing":
         runs.append(str(tmp_path / "nowhere"))
+    elif case == "bad statistic":
+        (tmp_path / "run0.0-2" / "result.json").write_text(json.dumps(_result("x")))
     elif case == "not a result":
         (tmp_path / "other.json").write_text(json.dumps({"x": 1}))
         runs.append(str(tmp_path / "other.json"))

@@ -57,9 +57,9 @@ def settings_layer(flat: dict) -> dict:
     for key in ("loop.min_iterations", "loop.max_iterations"):   # min first: min <= max
         if flat.get(key, 0) > ACTIONS:
             layer[key] = ACTIONS
-    if flat.get("filter.model_check.burn_in", 0) + flat.get("filter.model_check.min_actions",
-                                                            0) > ACTIONS:
+    burn_in = flat.get("filter.model_check.burn_in", 0)
+    min_actions = flat.get("filter.model_check.min_actions", 1)
+    if burn_in + min_actions > ACTIONS:
         layer["filter.model_check.burn_in"] = 0
-        layer["filter.model_check.min_actions"] = min(flat["filter.model_check.min_actions"],
-                                                      ACTIONS)
+        layer["filter.model_check.min_actions"] = min(min_actions, ACTIONS)
     return layer

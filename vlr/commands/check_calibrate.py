@@ -77,11 +77,18 @@ def _records(path: Path, group: str | None = None) -> list[tuple[Path, dict[str,
             if data.get("status") != "ok" or group not in (None, data.get("group"),
                                                            data.get("case")):
                 continue
-            settings, data = data.get("settings", {}), dict(data["result"])
+            result = data.get("result")
+            if not isinstance(result, dict):
+                raise UserError(f"{f}: a finished trial record without its result")
+            settings, data = data.get("settings", {}), dict(result)
             data.setdefault("settings", settings)
-        if not isinstance(data.get("model_check"), dict) or "settings" not in data:
+        if (not isinstance(data.get("model_check"), dict)
+                or not isinstance(data.get("settings"), dict)):
             raise UserError(f"{f}: no model_check and settings in it (a `vlr identify` "
                             "result.json or a sweep's trial record)")
+        stat = data["model_check"].get("statistic")
+        if stat is not None and (isinstance(stat, bool) or not isinstance(stat, int | float)):
+            raise UserError(f"{f}: model_check.statistic = {stat!r} is not a number")
         out.append((f, data))
     return out
 
