@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import yaml
 
 from tests.extras import needs_hardware
 from vlr import models
@@ -89,6 +90,16 @@ def test_a_wrong_type_and_an_unknown_key_are_one_error_naming_the_key():
     _one_line_error({"world.backend": "nowhere"}, "world.backend 'nowhere'")
     _one_line_error({"filter.particles.count": 3}, "filter.particles")  # no sub-keys
     _one_line_error({"filter": 5}, "filter")
+
+
+def test_a_number_written_with_an_exponent_is_a_number():
+    """YAML 1.1 reads `1e5` (no dot, no sign) as a string: in a settings file and as `--set
+    KEY=1e5` it is still the number."""
+    s = load_settings({"filter.motion.contact_stiffness": "1e5"},
+                      yaml.safe_load("filter: {observation: {sigma_pos_mm: 2e-1}}"))
+    assert s.filter.motion.contact_stiffness == 1e5
+    assert s.filter.observation.sigma_pos_mm == 0.2
+    _one_line_error({"filter.motion.contact_stiffness": "1e5x"}, "filter.motion.contact_stiffness")
 
 
 @pytest.mark.parametrize("key, value, match", [

@@ -221,6 +221,12 @@ def convert(value: Any, kind: Any, path: str) -> Any:
             raise UserError(f"{path}: {value!r} is not an integer")
         return int(value)
     if kind is float:
+        if isinstance(value, str):
+            # YAML 1.1 (PyYAML) reads 1e5, unlike 1.0e+5, as a string.
+            try:
+                value = float(value)
+            except ValueError:
+                raise UserError(f"{path}: {value!r} is not a number") from None
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise UserError(f"{path}: {value!r} is not a number")
         if math.isnan(value):
