@@ -4,6 +4,11 @@ identification's defaults: 0.2-0.4 mm within 0.4 mm of the grasp command, 0.1 s 
 the palm camera must see the tag after the grasp. A spec file of a new object, finger or
 hand is checked with it before it joins a sweep.
 
+It also says where the grasp leaves the filter's model, which touches the object with each
+finger's pad alone (docs/METHOD.md 8.2): the finger-states (a finger after an action) that
+carry more than a tenth of their normal force off the pad, on a link (`OFF_PAD_SHARE`). A
+grasp held that way is not refused, but its identification carries that model error.
+
 Usage: python -m vlr.models.check_grasps [--actions 50] [--seeds 0-4] HAND:OBJECT [HAND:OBJECT ...]
 (HAND and OBJECT: names in models/ or spec file paths). Prints one line per pair and exits 1
 if any grasp failed, slipped or lost its tag.
@@ -20,7 +25,10 @@ import numpy as np
 from vlr.explore import ExplorationRange, random_action
 from vlr.identify import LoopConfig
 
-__all__ = ["HoldReport", "check_hold", "main"]
+__all__ = ["HoldReport", "check_hold", "main", "OFF_PAD_SHARE"]
+
+#: A finger-state's share of its normal force off the pad above which it is counted.
+OFF_PAD_SHARE = 0.1
 
 
 @dataclass(frozen=True)
@@ -35,6 +43,8 @@ class HoldReport:
     move_mm: float               # median POM travel over an action [mm]
     largest_mm: float            # the largest [mm]
     messages: tuple[str, ...]    # why a seed failed
+    off_pad: int = 0             # finger-states with more than OFF_PAD_SHARE off the pad
+    finger_states: int = 0       # finger-states touching the object
 
     @property
     def ok(self) -> bool:
@@ -45,6 +55,7 @@ def check_hold(hand: str, obj: str, seeds: list[int], actions: int = 50) -> Hold
     """Grasp `obj` with `hand` and make `actions` random actions for each seed (the seed
     drives the actions as `vlr identify`'s does: `seed + 1`)."""
     from vlr.sim.backend import GraspError, SimHand, SimOptions, SimWorldOptions
+    from vlr.sim.truth import contact_summary
 
     from vlr.perception.pipeline import observe
 
@@ -54,6 +65,7 @@ def check_hold(hand: str, obj: str, seeds: list[int], actions: int = 50) -> Hold
     held = seen = 0
     moves: list[float] = []
     messages: list[str] = []
+    off_pad = states = 0
     for seed in seeds:
         with SimHand(obj, hand=hand, seed=seed,
                      options=SimOptions(ramp_time=SimWorldOptions.ramp_time)) as h:
@@ -76,6 +88,12 @@ def check_hold(hand: str, obj: str, seeds: list[int], actions: int = 50) -> Hold
                 before = h.truth().pom_position
                 report = h.apply(random_action(rng, h.commands, center, explore))
                 moves.append(float(np.linalg.norm(h.truth().pom_position - before)) * 1e3)
+                for points in contact_summary(h).points.values():
+                    total = sum(f for _, f, _ in points)
+                    if total > 0:
+                        states += 1
+                        off = sum(f for _, f, region in points if region != "pad")
+                        off_pad += off > OFF_PAD_SHARE * total
                 if not report.grasp_held:
                     messages.append(f"seed {seed}: lost at action {k + 1}: {report.message}")
                     ok = False
@@ -83,7 +101,7 @@ def check_hold(hand: str, obj: str, seeds: list[int], actions: int = 50) -> Hold
             held += ok
     return HoldReport(hand, obj, len(seeds), held, seen,
                       float(np.median(moves)) if moves else 0.0,
-                      max(moves, default=0.0), tuple(messages))
+                      max(moves, default=0.0), tuple(messages), off_pad, states)
 
 
 def _seeds(text: str) -> list[int]:
@@ -120,6 +138,8 @@ def main(argv: list[str] | None = None) -> int:
         failed += not r.ok
         print(f"{hand}:{obj}: held {r.held}/{r.seeds}, tag seen {r.tag_seen}/{r.seeds}, "
               f"POM move per action {r.move_mm:.2f} mm (median), {r.largest_mm:.2f} (largest)"
+              + (f"; off the pads in {r.off_pad} of {r.finger_states} finger-states (a "
+                 "contact the filter's model does not have)" if r.off_pad else "")
               + "".join(f"\n  {m}" for m in r.messages), flush=True)
     return 1 if failed else 0
 

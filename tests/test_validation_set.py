@@ -18,6 +18,10 @@ def test_validation_grasp_holds_and_shows_its_tag(hand, obj):
     r = check_hold(hand, obj, [0], actions=8)
     assert r.ok, r.messages
     assert 0.1 < r.move_mm < 10.0   # the object moves with the actions, and stays held
+    # NF4's long distal link touches the apple beside its pad (seeds 0-4, 50 actions: 149
+    # and 104 of 750 finger-states off the pads); every other pair touches with pads alone.
+    assert r.finger_states == 3 * 8
+    assert (r.off_pad > 0) == (hand in ("nh4", "nh5")), r.off_pad
 
 
 def _identify(obj: str, **more) -> dict:
