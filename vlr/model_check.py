@@ -42,10 +42,13 @@ from vlr.kernels.likelihood import Observed, mixture_log_density, pose_errors
 from vlr.observation import ObservationModel
 
 __all__ = ["ModelCheckConfig", "predictive_surprise", "nis_surprise", "verdict",
-           "threshold_by_rule", "MIN_CALIBRATION_TRIALS"]
+           "threshold_by_rule", "calibration_objects", "MIN_CALIBRATION_TRIALS",
+           "MIN_OBJECT_TRIALS"]
 
 #: Trials a threshold is measured on, at the least (`threshold_by_rule`).
 MIN_CALIBRATION_TRIALS = 5
+#: An object's decided trials, at the least, for its median to count (`threshold_by_rule`).
+MIN_OBJECT_TRIALS = 3
 
 
 @dataclass(frozen=True)
@@ -143,23 +146,42 @@ def nis_surprise(nis: float, dim: int) -> float:
     return float((nis - dim) / math.sqrt(2.0 * dim))
 
 
+def calibration_objects(objects: list[str]) -> tuple[list[str], list[str]]:
+    """The objects whose decided trials (one entry each in `objects`) are enough for their
+    median to count in `threshold_by_rule` (`MIN_OBJECT_TRIALS`), and those left out: an
+    object that converges within a few actions gets a verdict on a trial or two, and one
+    short trial is no median (the wine glass with the tensions read)."""
+    from collections import Counter
+
+    from vlr import smoke
+
+    counts = Counter(objects)
+    need = smoke.cap(MIN_OBJECT_TRIALS, 1)
+    return (sorted(o for o, n in counts.items() if n >= need),
+            sorted(o for o, n in counts.items() if n < need))
+
+
 def threshold_by_rule(objects: list[str], statistics: list[float]) -> float:
     """The threshold measured on trials the model explains, each trial's object and
     statistic: the median plus three times the statistic's spread for a new object,
     sqrt(s_b^2 + s_w^2), with s_b the SD of the objects' medians and s_w the robust SD
-    (1.4826 median absolute deviation) of the trials about their object's median. The trials
-    come in clusters, an object's seeds close together and the objects apart: a robust SD of
-    them all discounts the objects' spread, a plain SD follows a trial that lost track
+    (1.4826 median absolute deviation) of the trials about their object's median, over the
+    objects with `MIN_OBJECT_TRIALS` decided trials or more (`calibration_objects`). The
+    trials come in clusters, an object's seeds close together and the objects apart: a robust
+    SD of them all discounts the objects' spread, a plain SD follows a trial that lost track
     (docs/DECISIONS.md)."""
     from vlr import smoke
 
     pairs = [(o, float(x)) for o, x in zip(objects, statistics, strict=True) if x is not None]
+    kept = set(calibration_objects([o for o, _ in pairs])[0])
+    pairs = [(o, x) for o, x in pairs if o in kept]
     need = smoke.cap(MIN_CALIBRATION_TRIALS, smoke.TRIALS)
     if len(pairs) < need or not all(math.isfinite(x) for _, x in pairs):
         raise ValueError(f"{len(pairs)} finite statistics: the rule needs at least {need}")
     names = sorted({o for o, _ in pairs})
     if len(names) < 2:
-        raise ValueError(f"trials on {names} alone: the rule needs two objects or more")
+        raise ValueError(f"trials on {names} alone: the rule needs two objects or more, "
+                         f"each with {smoke.cap(MIN_OBJECT_TRIALS, 1)} decided trials")
     medians = {o: float(np.median([x for p, x in pairs if p == o])) for o in names}
     residuals = np.array([x - medians[o] for o, x in pairs])
     s_w = 1.4826 * float(np.median(np.abs(residuals)))

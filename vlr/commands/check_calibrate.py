@@ -98,7 +98,12 @@ def thresholds(paths: list[str], group: str | None = None) -> dict[str, Any]:
     alone, "threshold_tensions" with the tensions weighed) the trials, their objects, their
     statistics' median and the threshold; and the scales they share."""
     from vlr import smoke
-    from vlr.model_check import MIN_CALIBRATION_TRIALS, threshold_by_rule
+    from vlr.model_check import (
+        MIN_CALIBRATION_TRIALS,
+        MIN_OBJECT_TRIALS,
+        calibration_objects,
+        threshold_by_rule,
+    )
 
     trials = [rec for p in paths for rec in _records(Path(p), group)]
     if not trials:
@@ -133,20 +138,25 @@ def thresholds(paths: list[str], group: str | None = None) -> dict[str, Any]:
         if not pairs:
             continue
         need = smoke.cap(MIN_CALIBRATION_TRIALS, smoke.TRIALS)
-        objects = sorted({o for o, _ in pairs})
-        if len(pairs) < need or len(objects) < 2:
-            raise UserError(f"{len(pairs)} decided trials on {len(objects)} object(s) for "
-                            f"{kind}: the rule needs at least {need} on two objects or more "
+        objects, short = calibration_objects([o for o, _ in pairs])
+        left = [(o, sum(p == o for p, _ in pairs)) for o in short]
+        kept = [(o, x) for o, x in pairs if o in objects]
+        if len(kept) < need or len(objects) < 2:
+            raise UserError(f"{len(pairs)} decided trials on {len(objects) + len(short)} "
+                            f"object(s) for {kind}: the rule needs at least {need} on two "
+                            f"objects or more, {smoke.cap(MIN_OBJECT_TRIALS, 1)} on each "
                             "(several objects, a few seeds each)")
+        pairs = kept
         names, stats = [o for o, _ in pairs], [x for _, x in pairs]
         out["kinds"][kind] = {"trials": len(pairs), "objects": len(objects),
-                              "median": float(np.median(stats)),
+                              "median": float(np.median(stats)), "left_out": left,
                               "threshold": round(threshold_by_rule(names, stats), 2)}
     return out
 
 
 def run(args: argparse.Namespace) -> int:
     from vlr.io import check_output_file, write_text_atomic
+    from vlr.model_check import MIN_OBJECT_TRIALS
 
     if args.out:
         check_output_file(args.out, "--out")
@@ -160,7 +170,9 @@ def run(args: argparse.Namespace) -> int:
         what = (f"camera and tensions ({res['tension_scale_n']} N)"
                 if kind == "threshold_tensions" else "camera")
         print(f"{what}: {k['trials']} trials on {k['objects']} objects, statistic median "
-              f"{k['median']:.3f} -> --set filter.model_check.{kind}={k['threshold']:.2f}")
+              f"{k['median']:.3f} -> --set filter.model_check.{kind}={k['threshold']:.2f}"
+              + "".join(f"; left out: {o} ({n} decided trial{'s' * (n > 1)}, "
+                        f"fewer than {MIN_OBJECT_TRIALS})" for o, n in k["left_out"]))
         lines.append(f"filter.model_check.{kind}: {k['threshold']:.2f}")
     if args.out:
         cmd = " ".join(args.runs) + (f" --group '{args.group}'" if args.group else "")
