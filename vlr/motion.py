@@ -93,8 +93,10 @@ class MotionConfig:
             to the jump limits: a large but continuous move is followed, a jump to another
             branch still fails. 0 turns it off; a settle never follows. The synthetic world
             calls a move a snap by the same test (`vlr.synthetic`).
-        contact_stiffness: the contacts' stiffness k_c [N/m]: 1e6 N/m leaves 10 um of
-            penetration at 10 N, and is the pads' stick stiffness.
+        contact_stiffness: the contacts' stiffness k_c [N/m], the gap's and the pads'
+            stick's: 3e5 N/m leaves 33 um of penetration at 10 N. The sim's pads are
+            softer still (about 2e4); at 1e6 the model's actions moved the object less than
+            the sim's do (docs/DECISIONS.md).
         limit_stiffness: one-sided joint-stop penalty [N m/rad]; 100 lets a spring preload
             of ~0.02 N m sink 0.01 degree into a stop.
         gravity: gravity vector in the palm frame [m/s^2]; default palm up.
@@ -119,7 +121,7 @@ class MotionConfig:
     friction: float | None = None
     spin_friction: float = 0.0
     follow_substeps: int = 16
-    contact_stiffness: float = 1e6
+    contact_stiffness: float = 3e5
     limit_stiffness: float = 100.0
     gravity: tuple[float, float, float] = (0.0, 0.0, -9.81)
     max_iter: int = 30
