@@ -1,6 +1,8 @@
 """The validation set (models/README.md, "Validation set"): objects and fingers the
 identification's defaults were not tuned on. Their grasps hold through a trial's actions."""
 
+import re
+
 import numpy as np
 import pytest
 from vlr.models.check_grasps import check_hold
@@ -73,3 +75,14 @@ def test_check_grasps_bad_input_is_one_line(argv, named, capsys):
     assert exc.value.code == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert named in err[-1] and "Traceback" not in "".join(err)
+
+
+def test_check_grasps_prints_the_finger_states_off_the_pads(capsys):
+    """The command's line for a grasp that touches a link (NH4's right finger on the apple)
+    says how many finger-states did, and a pad-only grasp's line says nothing of it."""
+    from vlr.models.check_grasps import main
+
+    assert main(["--seeds", "0", "--actions", "3", "nh4:apple", "modelo:apple"]) == 0
+    nh4, modelo = capsys.readouterr().out.strip().splitlines()
+    assert re.search(r"off the pads in [1-9]\d* of 9 finger-states", nh4), nh4
+    assert "off the pads" not in modelo
