@@ -8,7 +8,7 @@ it set, each size a command would spend minutes on is capped where the command r
   the loop's actions (`loop.max_iterations`, `loop.min_iterations`) at most `ACTIONS`, the
   model check's burn-in and minimum actions within them (a verdict, not "undecided");
 - seeds (`vlr.sweep.parse_seeds`): the first one only; a sweep's trials: the first `TRIALS`,
-  and as many are enough for `vlr model-check-calibrate`;
+  and as many are enough for `vlr model-check-calibrate` (one decided trial an object);
 - a task's episode: at most `TASK_MOVES` moves; `vlr bench`: particle counts at most
   `BENCH_PARTICLES`, one timed iteration each; `vlr gap` and `vlr crb`: `ACTIONS` actions.
 
