@@ -351,6 +351,7 @@ class IterationRecord:
     n_invalid: int
     ci_deg: float
     surprise: float = float("nan")
+    parts: tuple = (float("nan"), float("nan"))
 
 
 def _liu_west(x: np.ndarray, a: float, h: float, rng: np.random.Generator) -> np.ndarray:
@@ -652,6 +653,8 @@ class ParticleFilter(GraspFilter):
         tm["observation"] = time.perf_counter() - t
         t = time.perf_counter()
         surprise = self._surprise(state, observation, tensions)
+        import vlr.model_check as _mc
+        parts = _mc.LAST_PARTS
         tm["check"] = time.perf_counter() - t
         t = time.perf_counter()
         w, beta = temper(log_lik, cfg.ess_fraction)
@@ -671,7 +674,7 @@ class ParticleFilter(GraspFilter):
         self._jitter(x, idx)
         tm["jitter"] = time.perf_counter() - t
         rec = IterationRecord(self.iteration, self.command, prior, posterior, ess, beta,
-                              n_invalid, ci, surprise)
+                              n_invalid, ci, surprise, parts)
         self.history.append(rec)
         return rec
 

@@ -139,7 +139,24 @@ def predictive_surprise(pos: np.ndarray, rot: np.ndarray, anchors: np.ndarray,
                         float(s2), log_p)
     rep = log_p[1:]
     sd = rep.std()
-    return float((rep.mean() - log_p[0]) / sd) if sd > 0 else float("nan")
+    z = float((rep.mean() - log_p[0]) / sd) if sd > 0 else float("nan")
+    global LAST_PARTS
+    LAST_PARTS = (float("nan"), float("nan"))
+    if n_t:
+        parts = []
+        for err, vv, ww, di, ss in ((e, v, w, d_inv, float(s2)),
+                                    (t_err, np.zeros((k, n_t)), wt,
+                                     np.full(n_t, obs_model.sigma_tension ** -2.0), 0.0)):
+            lp = np.empty(replicates + 1)
+            mixture_log_density(np.ascontiguousarray(err), np.ascontiguousarray(vv),
+                                np.ascontiguousarray(ww), np.ascontiguousarray(di), ss, lp)
+            r = lp[1:]
+            parts.append(float((r.mean() - lp[0]) / r.std()) if r.std() > 0 else float("nan"))
+        LAST_PARTS = tuple(parts)
+    return z
+
+
+LAST_PARTS = (float("nan"), float("nan"))
 
 
 def nis_surprise(nis: float, dim: int) -> float:

@@ -48,6 +48,9 @@ def summarize(result, model, settings, wall: float, final_truth=None) -> dict:
     out["model_check"] = verdict([r.surprise for r in result.history],
                                  settings.filter.model_check,
                                  settings.filter.observation.sigma_tension_n > 0)
+    out["model_check"]["parts_by_iteration"] = [
+        [None if not np.isfinite(x) else round(float(x), 3) for x in getattr(r, "parts", ())]
+        for r in result.history]
     # Per iteration (the grasp's update first): the convergence measure, and against the
     # truth the mean proximal error, so that a table can read either at any iteration.
     out["ci_deg_by_iteration"] = [round(float(r.ci_deg), 4) for r in result.history]
