@@ -384,3 +384,18 @@ def test_a_run_killed_while_writing_leaves_no_finished_folder(tmp_path, monkeypa
     monkeypatch.setattr(vlr.results, "_plot", killed)   # after history.npz, before the rest
     assert main(args) == 130
     assert (tmp_path / "history.npz").exists() and not (tmp_path / "result.json").exists()
+
+
+def test_help_piped_into_a_reader_that_stops_early_is_quiet():
+    # `vlr identify --help | head`: the reader closes the pipe; no traceback on stderr.
+    import subprocess
+    import sys
+
+    proc = subprocess.Popen([sys.executable, "-c", "from vlr.cli import main; "
+                             "import sys; sys.exit(main(['identify', '--help']))"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    proc.stdout.read(10)
+    proc.stdout.close()
+    err = proc.stderr.read().decode()
+    assert proc.wait(timeout=120) == 1
+    assert "Traceback" not in err and "BrokenPipe" not in err, err

@@ -50,6 +50,17 @@ def _unavailable(exc: Exception) -> int:
 
 
 def main(argv: list[str] | None = None) -> int:
+    try:
+        return _main(argv)
+    except BrokenPipeError:
+        # The reader went away (`vlr identify --help | head`): silence the interpreter's
+        # flush of stdout at exit, as the Python docs' note on SIGPIPE does.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        return 1
+
+
+def _main(argv: list[str] | None) -> int:
     from vlr.hand import CommandError, GraspError
     from vlr.logs import configure, level_for
     from vlr.memory import keep_freed_memory
