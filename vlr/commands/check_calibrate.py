@@ -155,9 +155,11 @@ def thresholds(paths: list[str], group: str | None = None) -> dict[str, Any]:
 
 
 def run(args: argparse.Namespace) -> int:
+    from vlr import smoke
     from vlr.io import check_output_file, write_text_atomic
     from vlr.model_check import MIN_OBJECT_TRIALS
 
+    need = smoke.cap(MIN_OBJECT_TRIALS, 1)
     if args.out:
         check_output_file(args.out, "--out")
     res = thresholds(args.runs, args.group)
@@ -172,7 +174,7 @@ def run(args: argparse.Namespace) -> int:
         print(f"{what}: {k['trials']} trials on {k['objects']} objects, statistic median "
               f"{k['median']:.3f} -> --set filter.model_check.{kind}={k['threshold']:.2f}"
               + "".join(f"; left out: {o} ({n} decided trial{'s' * (n > 1)}, "
-                        f"fewer than {MIN_OBJECT_TRIALS})" for o, n in k["left_out"]))
+                        f"fewer than {need})" for o, n in k["left_out"]))
         lines.append(f"filter.model_check.{kind}: {k['threshold']:.2f}")
     if args.out:
         cmd = " ".join(args.runs) + (f" --group '{args.group}'" if args.group else "")
