@@ -211,3 +211,18 @@ def test_identification_stops_where_the_hand_reports_the_grasp_lost(modelo):
     held = identify(Dropping(SyntheticWorld(modelo, OBJ, SyntheticConfig(seed=0)), 99),
                     world.observe, modelo, OBJ, world.nominal, cfg, loop)
     assert held.grasp_lost_at is None and held.iterations == 6
+
+
+def test_a_heavy_believed_object_still_gives_a_settled_grasp_guess():
+    """The guess's settle has no history, so the pads' sliding does not hold it: with it, the
+    gelatin box believed twice its mass slid off its start and the run ended in a traceback."""
+    from vlr import load_settings
+    from vlr.spec import load_object
+    from vlr.world import believed_object, grasp_guess
+
+    settings = load_settings({"world.backend": "sim", "world.object": "gelatin_box",
+                              "filter.object.mass": 0.194})
+    assert settings.filter.motion.friction  # the sim's model slides
+    model = HandModel.from_spec(load_hand(settings.world.hand))
+    guess = grasp_guess(settings, model, believed_object(settings, load_object("gelatin_box")))
+    assert np.all(np.isfinite(guess.theta))

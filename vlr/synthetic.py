@@ -17,7 +17,14 @@ import numpy as np
 
 from vlr.hand import GraspError
 from vlr.kinematics import HandModel, normals_from_angles
-from vlr.motion import MotionConfig, MotionModel, ObjectParams, ParticleState, rotvec_to_matrix
+from vlr.motion import (
+    STATUS,
+    MotionConfig,
+    MotionModel,
+    ObjectParams,
+    ParticleState,
+    rotvec_to_matrix,
+)
 from vlr.observation import PomObservation
 
 __all__ = ["SyntheticConfig", "NominalGrasp", "Truth", "SyntheticWorld", "nominal_grasp",
@@ -132,10 +139,17 @@ def nominal_grasp(model: HandModel, obj: ObjectParams, config: SyntheticConfig) 
                                np.zeros(3), np.eye(3))
     st.pos[0] = st.contacts(model)[0].mean(axis=0) - np.array([0.0, 0.0, config.pom_depth])
     st.anchor_to_pose(model)
-    settle = replace(config.motion, max_iter=500, jump_theta=np.pi, jump_pos=1.0)
+    # A settle has no history, so the pads' spin and sliding do not hold it (as the filter's
+    # own settles: `vlr.filter`); with them, a heavy object's guess slides off its start.
+    settle = replace(config.motion, max_iter=500, jump_theta=np.pi, jump_pos=1.0,
+                     friction=None, spin_friction=0.0)
     status, _ = MotionModel(model, obj, config.motion).solve(st, u0, settle)
     if status[0] != 0:
-        raise RuntimeError(f"nominal grasp did not settle (status {status[0]})")
+        raise GraspError(
+            f"the nominal grasp from {np.round(np.degrees(theta), 1).tolist()} deg does not "
+            f"settle in the model ({STATUS.get(int(status[0]), status[0])}; the object "
+            f"{obj.mass * 1e3:.0f} g): check the guess (filter.guess_theta_deg) and the object "
+            f"believed (filter.object)")
     return NominalGrasp(st.theta[0].copy(), contact, u0)
 
 
