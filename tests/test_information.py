@@ -291,3 +291,21 @@ def test_a_replay_runs_with_every_setting_its_trial_recorded():
            "result": {"commands_mm_by_iteration": cmds}}
     with pytest.raises(UserError, match="old: unknown setting 'backend'"):
         replay_commands(old, "old")
+
+
+def test_a_failed_linearisation_point_is_not_blamed_on_the_step():
+    """Both steps of a dimension failing may be the step's fault; the point itself failing
+    is the model's (it does not follow the actions from there), and a smaller step is no
+    remedy."""
+    trace = InformationTrace.__new__(InformationTrace)
+    trace.x = np.zeros(2)
+    trace.pf = type("PF", (), {"dim_names": ["a", "b"]})()
+    st = type("St", (), {})()
+    st.n = 5
+    st.valid = np.array([False, True, True, True, True])
+    with pytest.raises(FloatingPointError, match="point itself: the model does not follow") as e:
+        trace._check(st, np.array([2, 0, 0, 0, 0]), "action 3")
+    assert "relative_step" not in str(e.value)
+    st.valid = np.array([True, False, True, False, True])
+    with pytest.raises(FloatingPointError, match="both steps of a: try a smaller relative_step"):
+        trace._check(st, np.array([0, 2, 0, 2, 0]), "action 3")

@@ -158,10 +158,13 @@ class InformationTrace:
             return
         bad = [self.pf.dim_names[i] for i in np.flatnonzero(both)]
         codes = sorted({STATUS[int(c)] for c in status[~st.valid]})
+        # Where the point itself fails, the model cannot follow the actions from this grasp
+        # (with the pads sliding, a slide the sim's pads hold runs away): no step helps.
         raise FloatingPointError(
             f"{what}: {int((~st.valid).sum())} of {st.n} solves failed ({', '.join(codes)})"
-            + (" at the linearisation point" if not st.valid[0] else
-               f"; both steps of {', '.join(bad)}") + ": try a smaller relative_step")
+            + (" at the linearisation point itself: the model does not follow the actions "
+               "from this grasp" if not st.valid[0] else
+               f"; both steps of {', '.join(bad)}: try a smaller relative_step"))
 
     def _pairs(self, st: ParticleState) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Per dimension the particles (a, b) whose difference over `span` is its derivative:
