@@ -158,8 +158,8 @@ class InformationTrace:
             return
         bad = [self.pf.dim_names[i] for i in np.flatnonzero(both)]
         codes = sorted({STATUS[int(c)] for c in status[~st.valid]})
-        # Where the point itself fails, the model cannot follow the actions from this grasp
-        # (with the pads sliding, a slide the sim's pads hold runs away): no step helps.
+        # Where the point itself fails, the model cannot follow the actions from this grasp,
+        # and no step size helps.
         raise FloatingPointError(
             f"{what}: {int((~st.valid).sum())} of {st.n} solves failed ({', '.join(codes)})"
             + (" at the linearisation point itself: the model does not follow the actions "
