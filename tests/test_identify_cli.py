@@ -387,15 +387,20 @@ def test_a_run_killed_while_writing_leaves_no_finished_folder(tmp_path, monkeypa
 
 
 def test_help_piped_into_a_reader_that_stops_early_is_quiet():
-    # `vlr identify --help | head`: the reader closes the pipe; no traceback on stderr.
+    # `vlr identify --help | head`: the reader has closed the pipe; no traceback on stderr.
+    # The read end is closed before the child starts, so every write meets a broken pipe.
+    import os
     import subprocess
     import sys
 
-    proc = subprocess.Popen([sys.executable, "-c", "from vlr.cli import main; "
-                             "import sys; sys.exit(main(['identify', '--help']))"],
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE)
-    proc.stdout.read(10)
-    proc.stdout.close()
-    err = proc.stderr.read().decode()
-    assert proc.wait(timeout=120) == 1
+    read_end, write_end = os.pipe()
+    os.close(read_end)
+    try:
+        proc = subprocess.run([sys.executable, "-c", "from vlr.cli import main; "
+                               "import sys; sys.exit(main(['identify', '--help']))"],
+                              stdout=write_end, stderr=subprocess.PIPE, timeout=120)
+    finally:
+        os.close(write_end)
+    err = proc.stderr.decode()
+    assert proc.returncode == 1, err
     assert "Traceback" not in err and "BrokenPipe" not in err, err
